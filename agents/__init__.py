@@ -1,0 +1,1 @@
+"""agents — baselines and Stable-Baselines3 controllers for the rotor environments."""

@@ -1,0 +1,208 @@
+"""Compiled per-sample kernels of the recursive QR estimator.
+
+Everything here works on the augmented upper-triangular factor ``R`` of ``[X y]``
+(shape ``(n+1, n+1)``; the last column holds ``R[:, y]``).  The kernels are written
+for numba; with ``NUMBA_DISABLE_JIT=1`` they run (slowly) as plain Python, which is
+how the tests exercise the same code path without compilation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def rotate_in(R: np.ndarray, row: np.ndarray, start: int, scale: float = 1.0) -> None:
+    """Rotate ``row`` into the triangular factor ``R`` (Givens), from column ``start``.
+
+    Each row ``j`` of ``R`` is first multiplied by ``scale`` (``sqrt(lambda)`` for
+    forgetting; folding it in here saves a pass over ``R``).  On return ``row[start:]``
+    has been annihilated; ``R[j, j] >= 0`` is kept.
+    """
+    size = R.shape[0]
+    for j in range(start, size):
+        if scale != 1.0:
+            for k in range(j, size):
+                R[j, k] *= scale
+        a = row[j]
+        if a == 0.0:
+            continue
+        r_jj = R[j, j]
+        # sqrt instead of hypot: 3x faster, and overflow would need |entries| > 1e150.
+        r = math.sqrt(r_jj * r_jj + a * a)
+        inv = 1.0 / r
+        c = r_jj * inv
+        s = a * inv
+        R[j, j] = r
+        for k in range(j + 1, size):
+            rk = R[j, k]
+            ak = row[k]
+            R[j, k] = c * rk + s * ak
+            row[k] = c * ak - s * rk
+        row[j] = 0.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def identifiable_columns(R: np.ndarray, col_sq: np.ndarray, rtol: float, out: np.ndarray) -> int:
+    """Flag columns whose pivot is not negligible against the column's own norm.
+
+    ``col_sq[j]`` is the (weighted) squared norm of regressor ``j``; rotations keep it
+    equal to ``sum_k R[k, j]**2``.  A pivot ``R[j, j] <= rtol * norm_j`` means the column
+    lies (numerically) in the span of the columns before it — or is all zero.  The test
+    is per column, so it is invariant to the scale of each regressor.  Returns the
+    number of columns that are *not* identifiable.
+    """
+    n = col_sq.shape[0]
+    bad = 0
+    rtol2 = rtol * rtol
+    for j in range(n):
+        r = R[j, j]  # >= 0 by construction
+        ok = r * r > rtol2 * col_sq[j]
+        out[j] = ok
+        if not ok:
+            bad += 1
+    return bad
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def clean_factor(R: np.ndarray, ident: np.ndarray, work: np.ndarray, row: np.ndarray) -> None:
+    """Copy ``R`` into ``work`` with every non-identifiable column removed.
+
+    Removing column ``j`` means treating the regressor as zero: since ``A = Q R``,
+    zeroing ``R[:, j]`` gives a valid factor of ``A`` with that column zeroed; row ``j``
+    is then rotated back into the rows below it so that ``work`` is triangular again.
+    Every nested model built from ``work`` is the exact least-squares model without
+    the dropped columns (coefficient 0, no share of the residual energy).
+    """
+    size = R.shape[0]
+    for i in range(size):
+        for k in range(size):
+            work[i, k] = R[i, k]
+    n = size - 1
+    for j in range(n):
+        if ident[j]:
+            continue
+        for i in range(size):
+            work[i, j] = 0.0
+        for k in range(size):
+            row[k] = work[j, k]
+            work[j, k] = 0.0
+        rotate_in(work, row, j + 1)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def nested_energies(R: np.ndarray, out: np.ndarray) -> None:
+    """``out[i] = J_i = R[y,y]**2 + sum_{j >= i} R[j,y]**2`` for ``i = 0..n``."""
+    n = R.shape[0] - 1
+    acc = R[n, n] * R[n, n]
+    out[n] = acc
+    for i in range(n - 1, -1, -1):
+        acc += R[i, n] * R[i, n]
+        out[i] = acc
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def nested_coefficients(
+    R: np.ndarray, ident: np.ndarray, out: np.ndarray, T: np.ndarray, inv_diag: np.ndarray
+) -> None:
+    """All nested least-squares solutions at once, O(n^2) after one O(n^3/6) inversion.
+
+    With ``T = R_xx^{-1}`` (upper triangular) the inverse of a leading block is the
+    leading block of the inverse, so ``theta_i = T[:i, :i] @ R[:i, y]`` and
+    ``theta_{i+1} = theta_i + T[:i+1, i] * R[i, y]`` (Apley & Shi's order recursion).
+    ``out[i-1, :i]`` receives ``theta_i``; entries above the order are zero.  ``R`` must
+    be a clean factor (see :func:`clean_factor`): non-identifiable pivots are skipped.
+    ``T`` (``(n, n)``) and ``inv_diag`` (``(n,)``) are scratch space.
+    """
+    n = R.shape[0] - 1
+    for i in range(n):
+        inv_diag[i] = 1.0 / R[i, i] if ident[i] else 0.0
+    # Columns of T = R^{-1}, built one at a time (column i depends on columns < i).
+    for i in range(n):
+        for k in range(n):
+            T[k, i] = 0.0
+        if not ident[i]:
+            continue
+        T[i, i] = inv_diag[i]
+        for k in range(i - 1, -1, -1):
+            acc = 0.0
+            for m in range(k + 1, i + 1):
+                acc += R[k, m] * T[m, i]
+            T[k, i] = -acc * inv_diag[k]
+    for k in range(n):
+        out[0, k] = 0.0
+    if ident[0]:
+        out[0, 0] = T[0, 0] * R[0, n]
+    for i in range(1, n):
+        for k in range(n):
+            out[i, k] = out[i - 1, k]
+        if ident[i]:
+            ry = R[i, n]
+            for k in range(i + 1):
+                out[i, k] += T[k, i] * ry
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def update_rows(
+    R: np.ndarray,
+    col_sq: np.ndarray,
+    sums: np.ndarray,
+    X: np.ndarray,
+    y: np.ndarray,
+    forgetting: float,
+    rtol: float,
+    energies_out: np.ndarray,
+    orders: np.ndarray,
+    coef_out: np.ndarray,
+) -> None:
+    """Time update with ``m`` rows, optionally recording per-sample histories.
+
+    ``sums`` holds ``[n_samples, sum w, sum w^2]``.  ``energies_out`` has shape
+    ``(m, n+1)`` or ``(0, n+1)`` (not recorded); ``coef_out`` has shape
+    ``(m, len(orders), n)`` or ``(0, ...)``.
+    """
+    m, n = X.shape
+    size = n + 1
+    sqrt_lam = math.sqrt(forgetting)
+    row = np.empty(size)
+    scratch_row = np.empty(size)
+    work = np.empty((size, size))
+    ident = np.empty(n, dtype=np.bool_)
+    all_coef = np.empty((n, n))
+    T = np.empty((n, n))
+    inv_diag = np.empty(n)
+    record_e = energies_out.shape[0] > 0
+    record_c = coef_out.shape[0] > 0
+    n_orders = orders.shape[0]
+    for t in range(m):
+        for j in range(n):
+            v = X[t, j]
+            row[j] = v
+            col_sq[j] = forgetting * col_sq[j] + v * v
+        row[n] = y[t]
+        rotate_in(R, row, 0, sqrt_lam)
+        sums[0] += 1.0
+        sums[1] = forgetting * sums[1] + 1.0
+        sums[2] = forgetting * forgetting * sums[2] + 1.0
+        if record_e or record_c:
+            bad = identifiable_columns(R, col_sq, rtol, ident)
+            F = R
+            if bad > 0:
+                clean_factor(R, ident, work, scratch_row)
+                F = work
+            if record_e:
+                # J_i = R[y,y]^2 + sum_{j >= i} R[j,y]^2, inlined (hot path)
+                acc = F[n, n] * F[n, n]
+                energies_out[t, n] = acc
+                for i in range(n - 1, -1, -1):
+                    acc += F[i, n] * F[i, n]
+                    energies_out[t, i] = acc
+            if record_c:
+                nested_coefficients(F, ident, all_coef, T, inv_diag)
+                for q in range(n_orders):
+                    o = orders[q]
+                    for k in range(n):
+                        coef_out[t, q, k] = all_coef[o - 1, k]

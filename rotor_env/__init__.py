@@ -1,0 +1,1 @@
+"""rotor_env — the accelerating rotor: effects, simulator, Gymnasium environments, CLI."""
