@@ -408,17 +408,22 @@ class RecursiveQR:
             with np.load(path, allow_pickle=False) as data:
                 meta = json.loads(str(data["meta"]))
                 R, col_sq, sums = data["R"], data["col_sq"], data["sums"]
-        except (OSError, KeyError, ValueError) as exc:
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            # TypeError: np.load of a plain .npy gives an array, not an archive
             raise ValueError(f"{path}: not a RecursiveQR state file ({exc})") from exc
-        if meta.get("version") != _STATE_VERSION:
-            raise ValueError(f"{path}: unsupported state version {meta.get('version')!r}")
-        est = cls(
-            forgetting=meta["forgetting"],
-            prior=meta["prior"],
-            columns=meta["columns"],
-            groups=meta["groups"],
-            rtol=meta["rtol"],
-        )
+        if not isinstance(meta, dict) or meta.get("version") != _STATE_VERSION:
+            version = meta.get("version") if isinstance(meta, dict) else None
+            raise ValueError(f"{path}: unsupported state version {version!r}")
+        try:
+            est = cls(
+                forgetting=meta["forgetting"],
+                prior=meta["prior"],
+                columns=meta["columns"],
+                groups=meta["groups"],
+                rtol=meta["rtol"],
+            )
+        except (KeyError, TypeError, AttributeError) as exc:
+            raise ValueError(f"{path}: incomplete RecursiveQR state metadata ({exc!r})") from exc
         n = est.n
         if R.shape != (n + 1, n + 1) or col_sq.shape != (n,) or sums.shape != (3,):
             raise ValueError(f"{path}: arrays do not match {n} columns")

@@ -87,7 +87,7 @@ def f_log10_sf(F: np.ndarray | float, df_num, df_den) -> np.ndarray:
     )
     with np.errstate(all="ignore"):
         sf = stats.f.sf(F, d1, d2)
-        out = np.log10(np.where(sf > 0, sf, 1.0))
+        out = np.array(np.log10(np.where(sf > 0, sf, 1.0)), dtype=float)  # 0-d stays an array
     small = ~(sf > _SF_SWITCH)
     if np.any(small):
         # sf(F) = I_x(d2/2, d1/2) with x = d2 / (d2 + d1 F); x is tiny exactly here.
