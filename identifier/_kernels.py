@@ -206,3 +206,87 @@ def update_rows(
                     o = orders[q]
                     for k in range(n):
                         coef_out[t, q, k] = all_coef[o - 1, k]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def betainc_cf(a: np.ndarray, b: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
+    """Lentz's continued fraction of the regularised incomplete beta, element by element.
+
+    ``out[i]`` receives the *log* of the fraction's value ``h`` so that
+    ``log I_x(a, b) = a log x + b log(1-x) - log B(a, b) - log a + log h``;
+    converges for ``x < (a+1)/(a+b+2)`` (the lower tail, where ``I`` is tiny).
+    """
+    tiny = 1e-300
+    for i in range(x.shape[0]):
+        ai, bi, xi = a[i], b[i], x[i]
+        qab, qap, qam = ai + bi, ai + 1.0, ai - 1.0
+        c = 1.0
+        d = 1.0 - qab * xi / qap
+        if abs(d) < tiny:
+            d = tiny
+        d = 1.0 / d
+        h = d
+        for m in range(1, 1_000_000):
+            m2 = 2.0 * m
+            aa = m * (bi - m) * xi / ((qam + m2) * (ai + m2))
+            d = 1.0 + aa * d
+            if abs(d) < tiny:
+                d = tiny
+            c = 1.0 + aa / c
+            if abs(c) < tiny:
+                c = tiny
+            d = 1.0 / d
+            h *= d * c
+            aa = -(ai + m) * (qab + m) * xi / ((ai + m2) * (qap + m2))
+            d = 1.0 + aa * d
+            if abs(d) < tiny:
+                d = tiny
+            c = 1.0 + aa / c
+            if abs(c) < tiny:
+                c = tiny
+            d = 1.0 / d
+            delta = d * c
+            h *= delta
+            if abs(delta - 1.0) < 1e-15:
+                break
+        out[i] = math.log(h)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def snapshot(
+    R: np.ndarray,
+    col_sq: np.ndarray,
+    rtol: float,
+    group_masks: np.ndarray,
+    ident: np.ndarray,
+    coef: np.ndarray,
+    J_without: np.ndarray,
+) -> float:
+    """Everything the tests of effects need, in one compiled call.
+
+    Fills ``ident`` (columns in use), ``coef`` (full-model parameters) and
+    ``J_without[g]`` (residual energy of the full model without group ``g``, whose
+    columns are ``group_masks[g]``); returns the full model's residual energy.
+    """
+    size = R.shape[0]
+    n = size - 1
+    work = np.empty((size, size))
+    work2 = np.empty((size, size))
+    row = np.empty(size)
+    keep = np.empty(n, dtype=np.bool_)
+    T = np.empty((n, n))
+    inv_diag = np.empty(n)
+    all_coef = np.empty((n, n))
+    identifiable_columns(R, col_sq, rtol, ident)
+    clean_factor(R, ident, work, row)
+    nested_coefficients(work, ident, all_coef, T, inv_diag)
+    for k in range(n):
+        coef[k] = all_coef[n - 1, k]
+    J_full = work[n, n] * work[n, n]
+    for g in range(group_masks.shape[0]):
+        for k in range(n):
+            keep[k] = ident[k] and not group_masks[g, k]
+        # dropping more columns from the clean factor = treating them as zero too
+        clean_factor(work, keep, work2, row)
+        J_without[g] = work2[n, n] * work2[n, n]
+    return J_full

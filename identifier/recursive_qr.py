@@ -356,25 +356,35 @@ class RecursiveQR:
             alpha=alpha,
         )
 
+    def _group_masks(self) -> np.ndarray:
+        masks = np.zeros((len(self.groups), self.n), dtype=np.bool_)
+        for g, cols in enumerate(self.groups.values()):
+            masks[g, [self.columns.index(c) for c in cols]] = True
+        return masks
+
+    def effect_energies(self) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+        """One compiled pass: ``(J_without_group, J_full, coefficients, identifiable)``.
+
+        ``J_without_group[g]`` is the residual energy of the full model without the
+        columns of group ``g`` (in :attr:`groups` order).  This is the fast path used
+        by :meth:`effect_tests` and by the identification wrapper at every step.
+        """
+        masks = self._group_masks()
+        ident = np.empty(self.n, dtype=np.bool_)
+        coef = np.empty(self.n)
+        J_without = np.empty(len(masks))
+        J_full = K.snapshot(self.R, self._col_sq, self.rtol, masks, ident, coef, J_without)
+        return J_without, float(J_full), coef, ident
+
     def effect_tests(self, alpha: float = 0.05) -> SignificanceTable:
         """Each named effect tested *last*: full model vs full model without its columns."""
-        ident = self.identifiable()
-        p = int(ident.sum())
-        J_full = self._clean(ident)[self.n, self.n] ** 2
-        names, Jr, d1 = [], [], []
-        for name, cols in self.groups.items():
-            keep = ident.copy()
-            idx = [self.columns.index(c) for c in cols]
-            keep[idx] = False
-            names.append(name)
-            d1.append(int(ident[idx].sum()))
-            Jr.append(self._clean(keep)[self.n, self.n] ** 2)
-        d2 = self.effective_samples - p
-        F, pv, lp, ok = partial_f(np.array(Jr), J_full, np.array(d1, float), d2)
-        d1a = np.array(d1, dtype=float)
-        return SignificanceTable(
-            tuple(names), F, d1a, np.full(len(names), d2), pv, lp, ok, kind="last", alpha=alpha
-        )
+        J_without, J_full, _, ident = self.effect_energies()
+        masks = self._group_masks()
+        d1 = (masks & ident).sum(axis=1).astype(float)
+        d2 = self.effective_samples - float(ident.sum())
+        F, pv, lp, ok = partial_f(J_without, J_full, d1, d2)
+        names = tuple(self.groups)
+        return SignificanceTable(names, F, d1, np.full(len(names), d2), pv, lp, ok, kind="last", alpha=alpha)
 
     def information_criteria(self) -> InformationCriteria:
         """AIC, BIC, FPE of the nested models of order ``0..n``."""

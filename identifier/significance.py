@@ -31,7 +31,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import special, stats
+from scipy import special
+
+from ._kernels import betainc_cf
 
 __all__ = [
     "InformationCriteria",
@@ -49,35 +51,11 @@ _SF_SWITCH = 1e-250
 
 
 def _log_betainc_cf(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``log I_x(a, b)`` by Lentz's continued fraction; valid for ``x < (a+1)/(a+b+2)``."""
-    tiny = 1e-300
-    qab, qap, qam = a + b, a + 1.0, a - 1.0
-    c = np.ones_like(x)
-    d = 1.0 - qab * x / qap
-    d = np.where(np.abs(d) < tiny, tiny, d)
-    d = 1.0 / d
-    h = d.copy()
-    for m in range(1, 2000):
-        m2 = 2.0 * m
-        aa = m * (b - m) * x / ((qam + m2) * (a + m2))
-        d = 1.0 + aa * d
-        d = np.where(np.abs(d) < tiny, tiny, d)
-        c = 1.0 + aa / c
-        c = np.where(np.abs(c) < tiny, tiny, c)
-        d = 1.0 / d
-        h *= d * c
-        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))
-        d = 1.0 + aa * d
-        d = np.where(np.abs(d) < tiny, tiny, d)
-        c = 1.0 + aa / c
-        c = np.where(np.abs(c) < tiny, tiny, c)
-        d = 1.0 / d
-        delta = d * c
-        h *= delta
-        if np.all(np.abs(delta - 1.0) < 1e-15):
-            break
-    front = a * np.log(x) + b * np.log1p(-x) - special.betaln(a, b) - np.log(a)
-    return front + np.log(h)
+    """``log I_x(a, b)`` in the lower tail (``x < (a+1)/(a+b+2)``), by continued fraction."""
+    a, b, x = (np.ascontiguousarray(v, dtype=float).ravel() for v in np.broadcast_arrays(a, b, x))
+    log_h = np.empty_like(x)
+    betainc_cf(a, b, x, log_h)
+    return a * np.log(x) + b * np.log1p(-x) - special.betaln(a, b) - np.log(a) + log_h
 
 
 def f_log10_sf(F: np.ndarray | float, df_num, df_den) -> np.ndarray:
@@ -86,7 +64,8 @@ def f_log10_sf(F: np.ndarray | float, df_num, df_den) -> np.ndarray:
         np.asarray(F, dtype=float), np.asarray(df_num, dtype=float), np.asarray(df_den, dtype=float)
     )
     with np.errstate(all="ignore"):
-        sf = stats.f.sf(F, d1, d2)
+        # the ufunc behind stats.f.sf, without the distribution machinery (~50x faster)
+        sf = special.fdtrc(d1, d2, F)
         out = np.array(np.log10(np.where(sf > 0, sf, 1.0)), dtype=float)  # 0-d stays an array
     small = ~(sf > _SF_SWITCH)
     if np.any(small):

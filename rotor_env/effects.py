@@ -234,9 +234,10 @@ register_effect(
         from_coefficients=_from,
         moment="-D (th_y cos2phi + th_x sin2phi),  -D (th_y sin2phi - th_x cos2phi)",
         cause="unsymmetrical shaft stiffness: a breathing or open crack, a keyway, a flat",
-        signature="2x in rotating coordinates (1x and 3x in the fixed frame for a 1x whirl); "
-        "unstable band near half the critical speed",
-        orders=(1, 3),
+        signature="splits the critical speed into sqrt(k-D)..sqrt(k+D), unstable in between; "
+        "a whirl at frequency w leaves order 2 - w/speed (a static side load: 2x, the crack's classic "
+        "signature); synchronous response stays 1x",
+        orders=(1, 2),
     )
 )
 _to, _from = _identity(("k30", "k21", "k12", "k03"))

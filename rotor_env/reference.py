@@ -62,12 +62,11 @@ def reference_solution(
     state = np.zeros(4)
     for t0, t1, D in segments:
         mask = (t_eval >= t0) & (t_eval <= t1)
-        sol = solve_ivp(
-            rhs_for(D), (t0, t1), state, method="LSODA", rtol=rtol, atol=atol, t_eval=t_eval[mask]
-        )
+        # one pass per segment: evaluate at the samples and at the segment's end
+        te = np.append(t_eval[mask], t1) if t_eval[mask][-1] < t1 else t_eval[mask]
+        sol = solve_ivp(rhs_for(D), (t0, t1), state, method="LSODA", rtol=rtol, atol=atol, t_eval=te)
         if not sol.success:
             raise RuntimeError(f"reference integration failed: {sol.message}")
-        out[mask] = sol.y.T
-        fin = solve_ivp(rhs_for(D), (t0, t1), state, method="LSODA", rtol=rtol, atol=atol)
-        state = fin.y[:, -1]
+        out[mask] = sol.y.T[: mask.sum()]
+        state = sol.y[:, -1]
     return out

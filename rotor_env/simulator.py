@@ -141,11 +141,15 @@ def integrate(accel, state, t0, phi0, phid0, a, ip, coef, h, My, Mx, n_rec, ever
     """
     eta = 0.5 * h * dt_sub
     thx, thy, wx, wy = state[0], state[1], state[2], state[3]
-    tau = 0.0
     hh = 0.5 * dt_sub
+    k6 = dt_sub / 6.0
+    # a1 is carried over: the last stage of one step evaluates the new state, which is
+    # both the next step's first stage and the recorded acceleration (4 evaluations/step).
+    a1y, a1x = _derivs(accel, 0.0, thx, thy, wx, wy, phi0, phid0, a, ip, coef, h, eta, My, Mx)
+    step = 0
     for r in range(n_rec):
         for _ in range(every):
-            a1y, a1x = _derivs(accel, tau, thx, thy, wx, wy, phi0, phid0, a, ip, coef, h, eta, My, Mx)
+            tau = step * dt_sub  # no accumulated rounding in time
             x2, y2, u2, v2 = thx + hh * wx, thy + hh * wy, wx + hh * a1x, wy + hh * a1y
             a2y, a2x = _derivs(accel, tau + hh, x2, y2, u2, v2, phi0, phid0, a, ip, coef, h, eta, My, Mx)
             x3, y3, u3, v3 = thx + hh * u2, thy + hh * v2, wx + hh * a2x, wy + hh * a2y
@@ -153,15 +157,15 @@ def integrate(accel, state, t0, phi0, phid0, a, ip, coef, h, My, Mx, n_rec, ever
             x4, y4 = thx + dt_sub * u3, thy + dt_sub * v3
             u4, v4 = wx + dt_sub * a3x, wy + dt_sub * a3y
             a4y, a4x = _derivs(accel, tau + dt_sub, x4, y4, u4, v4, phi0, phid0, a, ip, coef, h, eta, My, Mx)
-            k6 = dt_sub / 6.0
             thx += k6 * (wx + 2.0 * u2 + 2.0 * u3 + u4)
             thy += k6 * (wy + 2.0 * v2 + 2.0 * v3 + v4)
             wx += k6 * (a1x + 2.0 * a2x + 2.0 * a3x + a4x)
             wy += k6 * (a1y + 2.0 * a2y + 2.0 * a3y + a4y)
-            tau += dt_sub
+            step += 1
+            a1y, a1x = _derivs(accel, step * dt_sub, thx, thy, wx, wy, phi0, phid0, a, ip, coef, h, eta, My, Mx)
         if not (abs(thx) < 1e3 and abs(thy) < 1e3 and abs(wx) < 1e6 and abs(wy) < 1e6):
             return r
-        ay, ax = _derivs(accel, tau, thx, thy, wx, wy, phi0, phid0, a, ip, coef, h, eta, My, Mx)
+        tau = step * dt_sub
         out[r, 0] = t0 + tau
         out[r, 1] = phi0 + phid0 * tau + 0.5 * a * tau * tau
         out[r, 2] = phid0 + a * tau
@@ -170,8 +174,8 @@ def integrate(accel, state, t0, phi0, phid0, a, ip, coef, h, My, Mx, n_rec, ever
         out[r, 5] = thy
         out[r, 6] = wx
         out[r, 7] = wy
-        out[r, 8] = ax
-        out[r, 9] = ay
+        out[r, 8] = a1x
+        out[r, 9] = a1y
         state[0], state[1], state[2], state[3] = thx, thy, wx, wy
     return n_rec
 
@@ -276,6 +280,8 @@ class Simulator:
                 float(control[1]), float(control[0]), n, every, dt_sub, out[k + 1 : nxt + 1],
             )
             if done < n:
+                if pbar is not None:
+                    pbar.close()
                 raise SimulationError(
                     f"simulation diverged at t = {t0 + (done + 1) * dt:.4g}: |theta| exceeded "
                     f"{DIVERGENCE_LIMIT:g} (unstable parameters?)"
@@ -328,3 +334,56 @@ def simulate(
     if noise is not None:
         meas = meas.with_noise(noise, seed=seed)
     return meas
+
+
+@njit(cache=False)
+def integrate_profile(accel, state, t, phi, phid, ip, coef, h, every, out):
+    """Follow a measured spin profile: constant acceleration between samples.
+
+    The acceleration in interval ``k`` is ``(phid[k+1] - phid[k]) / (t[k+1] - t[k])`` and
+    each interval starts from the measured ``phi[k]``, so the simulated spin matches
+    the measured one at every sample.  Returns the rows written (``< len(t)``: diverged).
+    """
+    row = np.empty((1, out.shape[1]))
+    for k in range(t.shape[0] - 1):
+        dt = t[k + 1] - t[k]
+        a = (phid[k + 1] - phid[k]) / dt
+        done = integrate(accel, state, t[k], phi[k], phid[k], a, ip, coef, h, 0.0, 0.0, 1, every, dt / every, row)
+        if done < 1:
+            return k + 1
+        for j in range(out.shape[1]):
+            out[k + 1, j] = row[0, j]
+    return t.shape[0]
+
+
+def free_run(
+    params: RotorParams,
+    t: np.ndarray,
+    phi: np.ndarray,
+    phi_dot: np.ndarray,
+    initial: tuple[float, float, float, float],
+    max_substep: float = MAX_SUBSTEP,
+) -> Measurements:
+    """Simulate ``params`` driven by a measured spin profile from a measured initial state.
+
+    Output error simulation (as MATLAB's ``compare``): nothing from the measured
+    inclinations is used after ``t[0]``.  Raises :class:`SimulationError` if the model
+    diverges.
+    """
+    sim = Simulator(params, max_substep=max_substep)
+    t = np.ascontiguousarray(t, dtype=float)
+    if len(t) < 2:
+        raise ValueError("free_run needs at least two samples")
+    every, _ = sim.substeps(float(np.median(np.diff(t))))
+    coef, h = sim.coefficients(float(t[0]))
+    state = np.array(initial, dtype=float)
+    out = np.empty((len(t), len(COLUMNS)))
+    a0 = (phi_dot[1] - phi_dot[0]) / (t[1] - t[0])
+    out[0] = sim._row(float(t[0]), float(phi[0]), float(phi_dot[0]), a0, state, (0.0, 0.0))
+    done = integrate_profile(
+        sim.accel, state, t, np.ascontiguousarray(phi, dtype=float), np.ascontiguousarray(phi_dot, dtype=float),
+        params.ip, coef, h, every, out,
+    )
+    if done < len(t):
+        raise SimulationError(f"the model diverged at t = {t[done]:.4g} in the free-run simulation")
+    return Measurements(out)

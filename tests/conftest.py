@@ -1,0 +1,100 @@
+"""Independent references for the identifier tests (numpy lstsq, nothing from identifier).
+
+The helpers are exposed through the session fixture ``ref`` so that test modules do not
+import this file.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+
+def forgetting_weights(m: int, forgetting: float) -> np.ndarray:
+    """``w_k = lambda^(m-1-k)`` for samples ``k = 0..m-1`` (the newest has weight 1)."""
+    return forgetting ** np.arange(m - 1, -1, -1, dtype=float)
+
+
+def lstsq_equilibrated(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Least squares ``min ||A theta - b||`` with column equilibration.
+
+    numpy's ``lstsq`` truncates singular values below ``eps * max(m, n) * s_max``; with
+    columns scaled 1e-6..1e6 that would silently drop small-scale (but perfectly
+    informative) columns.  Scaling each column to unit norm first is the same least-squares
+    problem and removes that artefact from the reference.
+    """
+    if A.shape[1] == 0:
+        return np.zeros(0)
+    norms = np.linalg.norm(A, axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    theta, *_ = np.linalg.lstsq(A / norms, b, rcond=None)
+    return theta / norms
+
+
+def nested_reference(
+    X: np.ndarray,
+    y: np.ndarray,
+    *,
+    forgetting: float = 1.0,
+    prior: float = 0.0,
+    keep: np.ndarray | None = None,
+):
+    """Energies ``J_0..J_n`` and coefficients of every nested model, by ``lstsq``.
+
+    * weights ``w_k = lambda^(t-k)`` enter as rows scaled by ``sqrt(w_k)``;
+    * ``prior = delta`` starts the factor at ``sqrt(delta) I`` of ``[X y]``, i.e. the data
+      are augmented by the ``n + 1`` rows ``sqrt(delta_t) I_{n+1}`` with
+      ``delta_t = lambda^t delta`` (the prior is scaled by ``sqrt(lambda)`` at every
+      step like all other rows).  Order ``i`` uses the first ``i`` columns of *all* rows,
+      so the prior row of ``y`` always contributes ``delta_t`` to ``J_i``;
+    * ``keep`` (bool mask): columns treated as absent (coefficient 0).
+
+    Returns ``(J, C)``: ``J`` shape ``(n+1,)``, ``C`` shape ``(n, n)`` with row ``i-1`` the
+    order-``i`` coefficients, zero padded.
+    """
+    X = np.asarray(X, dtype=float)
+    y = np.asarray(y, dtype=float)
+    m, n = X.shape
+    sw = np.sqrt(forgetting_weights(m, forgetting))
+    A = np.column_stack([X, y]) * sw[:, None]
+    if prior > 0:
+        A = np.vstack([A, np.sqrt(prior * forgetting**m) * np.eye(n + 1)])
+    Xa, ya = A[:, :n], A[:, n]
+    keep = np.ones(n, dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
+    J = np.empty(n + 1)
+    C = np.zeros((n, n))
+    J[0] = float(ya @ ya)
+    for i in range(1, n + 1):
+        cols = np.flatnonzero(keep[:i])
+        theta = lstsq_equilibrated(Xa[:, cols], ya)
+        r = ya - Xa[:, cols] @ theta
+        J[i] = float(r @ r)
+        C[i - 1, cols] = theta
+    return J, C
+
+
+def fitted_error(X: np.ndarray, theta: np.ndarray, theta_ref: np.ndarray, y: np.ndarray, w=None):
+    """``||X (theta - theta_ref)||_w / ||y||_w``: the coefficient error measured where it
+    matters (in the fitted values).  Unlike the coefficient error itself it stays small
+    for ill-conditioned (near-collinear or badly scaled) columns, for which a backward
+    stable solver guarantees only the fitted values, not each coefficient."""
+    sw = np.ones(X.shape[0]) if w is None else np.sqrt(w)
+    d = (X[:, : theta.size] @ (theta - theta_ref)) * sw
+    return float(np.linalg.norm(d) / np.linalg.norm(y * sw))
+
+
+@pytest.fixture(scope="session")
+def ref() -> SimpleNamespace:
+    return SimpleNamespace(
+        forgetting_weights=forgetting_weights,
+        lstsq=lstsq_equilibrated,
+        nested=nested_reference,
+        fitted_error=fitted_error,
+    )
+
+
+@pytest.fixture()
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20240611)
