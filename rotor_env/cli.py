@@ -7,10 +7,17 @@ import sys
 from collections.abc import Sequence
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
+def _cmd_identifier_demo(args: argparse.Namespace) -> int:
     from identifier import demo
 
     demo.run()
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from .walkthrough import run_walkthrough
+
+    run_walkthrough(args.out, force=args.force, seed=args.seed)
     return 0
 
 
@@ -175,15 +182,170 @@ def _add_simulate_parser(sub) -> None:
     p.set_defaults(func=_cmd_simulate)
 
 
+# ---------------------------------------------------------------------- paper
+def _cmd_paper(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    from .paper import run_paper, table2
+
+    out = Path(args.out) if args.out else None
+    if out is not None and out.exists() and any(out.iterdir()) and not args.force:
+        raise _UsageError(f"{out} exists and is not empty; use --force to write into it")
+    cases = run_paper(out, seed=args.seed, progress=sys.stderr.isatty() and not args.json)
+    if args.json:
+        print(json.dumps(table2(cases, 300.0)))
+    else:
+        for name, case in cases.items():
+            r = case.reading(300.0)
+            cells = ", ".join(
+                f"{k}={v['estimate']:.4f}" + (f" (F {v['F']:.4g}, {'sig' if v['significant'] else 'n.s.'})" if "F" in v else "")
+                for k, v in r.items()
+            )
+            print(f"case {name} ({case.label}) at t = 300: {cells}")
+        if out is not None:
+            print(f"figures and Table 2 written to {out}/ (fig3_response.png, fig4_parameters.png, "
+                  "fig5_significance.png, table2.md, table2.csv)")
+    return 0
+
+
+def _add_paper_parser(sub) -> None:
+    p = sub.add_parser("paper", help="re-run Zhou & Shi (2004)'s numerical study with the online estimator")
+    p.add_argument("--out", metavar="DIR", help="write Fig. 3-5 (PNG) and Table 2 (Markdown, CSV) here")
+    p.add_argument("--json", action="store_true", help="print Table 2 at t = 300 as JSON")
+    p.add_argument("--seed", type=int, default=0, help="seed of the noise on y (default 0)")
+    p.add_argument("--force", action="store_true", help="write into a non-empty --out folder")
+    p.set_defaults(func=_cmd_paper)
+
+
+# ---------------------------------------------------------------------- diagnose / fit
+def _model_list(text: str | None, default: Sequence[str]) -> list[str]:
+    if text is None:
+        return list(default)
+    names = [m.strip() for m in text.split(",") if m.strip()]
+    if not names:
+        raise _UsageError("--model needs at least one effect name")
+    from .effects import get_effect
+
+    for n in names:
+        get_effect(n)
+    return names
+
+
+def _load(args):
+    from .diagnosis import load_user_effect
+    from .io import load_measurements
+
+    user = [load_user_effect(spec).name for spec in (args.effect or [])]
+    return load_measurements(args.file), user
+
+
+def _cmd_diagnose(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .diagnosis import DEFAULT_MODEL, LIBRARY_CANDIDATES, diagnose
+
+    for target in (args.report, args.figures):
+        if target and Path(target).exists() and not args.force and (
+            Path(target).is_file() or any(Path(target).iterdir())
+        ):
+            raise _UsageError(f"{target} exists; use --force to overwrite it")
+    meas, user = _load(args)
+    model = _model_list(args.model, DEFAULT_MODEL)
+    candidates = [c for c in (*LIBRARY_CANDIDATES, *user) if c not in model]
+    result = diagnose(meas, model, candidates=candidates, ip=args.ip, alpha=args.alpha,
+                      progress=sys.stderr.isatty() and not args.json)
+    if args.figures:
+        result.save_figures(args.figures)
+    if args.report:
+        result.report(args.report, overwrite=args.force)
+    if args.json:
+        print(result.to_json())
+    else:
+        print(result.summary())
+        if args.figures:
+            print(f"\nfigures written to {args.figures}/")
+        if args.report:
+            print(f"report written to {args.report}")
+    return 0
+
+
+def _cmd_fit(args: argparse.Namespace) -> int:
+    import json
+
+    from .diagnosis import _jsonable, fit
+
+    meas, _ = _load(args)
+    model = _model_list(args.model, ())
+    comp = fit(meas, model, ip=args.ip)
+    out = {
+        "model": list(comp.model),
+        "coefficients": comp.coefficient_dict(),
+        "standard_errors": dict(zip(comp.columns, map(float, comp.standard_errors), strict=True)),
+        "physical": comp.physical,
+        "rms": comp.rms,
+        "r2": comp.r2,
+        "fit_percent": comp.fit_percent,
+        "fit_bands": comp.fit_bands,
+        "significance": {k: {kk: v[kk] for kk in ("F", "log10_p", "significant", "testable")}
+                         for k, v in comp.significance.items()},
+    }
+    if args.json:
+        print(json.dumps(_jsonable(out)))
+        return 0
+    print(f"model: {', '.join(comp.model)}")
+    print(f"equation error RMS {comp.rms:.4g}, R^2 {comp.r2:.5f}; free-run fit {comp.fit_percent:.1f} %")
+    for c, v, se in zip(comp.columns, comp.coefficients, comp.standard_errors, strict=True):
+        print(f"  {c:<14}{v: .6g} ± {se:.2g}")
+    print("effects tested last:")
+    for k, v in comp.significance.items():
+        verdict = "significant" if v["significant"] else ("not testable" if not v["testable"] else "not significant")
+        print(f"  {k:<22} F = {v['F']:.4g}, log10 p = {v['log10_p']:.4g}: {verdict}")
+    return 0
+
+
+def _add_diagnose_parsers(sub) -> None:
+    from .effects import EFFECTS
+
+    names = ", ".join(sorted(EFFECTS))
+    for cmd, helptext in (("diagnose", "compare a model with measurements and find the missing effect"),
+                          ("fit", "fit one model and report coefficients, errors and significance")):
+        p = sub.add_parser(cmd, help=helptext, description=f"{helptext}. Effects: {names}.")
+        p.add_argument("file", metavar="FILE", help="measurement file (CSV or Parquet)")
+        p.add_argument("--model", metavar="A,B,...",
+                       help="comma-separated effects" + (" (default: unbalance,viscous_damping)" if cmd == "diagnose" else ""),
+                       required=cmd == "fit")
+        p.add_argument("--ip", type=float, default=0.3, help="inertia ratio I_p/I_t (default 0.3)")
+        p.add_argument("--effect", action="append", metavar="MODULE:NAME",
+                       help="a user effect: a column function or an Effect (repeatable)")
+        p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+        if cmd == "diagnose":
+            p.add_argument("--alpha", type=float, default=0.05, help="significance level (default 0.05)")
+            p.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
+            p.add_argument("--figures", metavar="DIR", help="write the figures (PNG) to this folder")
+            p.add_argument("--force", action="store_true", help="overwrite --report / --figures")
+            p.set_defaults(func=_cmd_diagnose)
+        else:
+            p.set_defaults(func=_cmd_fit)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rotor-id",
         description="Online identification of the physical effects of an accelerating rotor.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("demo", help="the main walkthrough")
+    p = sub.add_parser("demo", help="the main walkthrough: diagnose a rotor with a hidden crack")
+    p.add_argument("--out", default="out/walkthrough", metavar="DIR",
+                   help="folder for the data, figures and report (default out/walkthrough)")
+    p.add_argument("--seed", type=int, default=1, help="seed of the measurement noise (default 1)")
+    p.add_argument("--force", action="store_true", help="replace the walkthrough's previous output")
     p.set_defaults(func=_cmd_demo)
+    p = sub.add_parser("identifier-demo", help="the recursive-QR identifier on a known linear system")
+    p.set_defaults(func=_cmd_identifier_demo)
     _add_simulate_parser(sub)
+    _add_paper_parser(sub)
+    _add_diagnose_parsers(sub)
     return parser
 
 
@@ -192,7 +354,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileExistsError, FileNotFoundError) as exc:
+    except (_UsageError, ValueError, FileExistsError, FileNotFoundError) as exc:
         print(f"rotor-id {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -253,6 +253,7 @@ class Comparison:
     fit_bands: list[dict]
     significance: dict[str, dict]
     residual: np.ndarray = field(repr=False)
+    onsets: dict[str, float] = field(default_factory=dict)
     simulated: Measurements | None = field(repr=False, default=None)
     diverged: bool = False
 
@@ -271,7 +272,9 @@ def _fit_percent(meas: np.ndarray, model: np.ndarray) -> float:
     return float(max(-100.0, 100.0 * (1.0 - np.linalg.norm(meas - model) / den)))
 
 
-def _model_params(model: Sequence[str], physical: dict[str, float], ip: float, known: dict) -> RotorParams:
+def _model_params(
+    model: Sequence[str], physical: dict[str, float], ip: float, known: dict, absent: Iterable[str] = ()
+) -> RotorParams:
     """A simulatable rotor from identified physical parameters (absent effects = 0)."""
     effects = tuple(dict.fromkeys((*PHYSICAL_EFFECTS, *model)))
     effects = tuple(e for e in effects if e != "unbalance_in_phase") + (
@@ -281,7 +284,9 @@ def _model_params(model: Sequence[str], physical: dict[str, float], ip: float, k
     for e in effects:
         eff = EFFECTS[e]
         for p in eff.parameters:
-            if e in model:
+            if e in absent:
+                v = 0.0
+            elif e in model:
                 v = physical.get(p.name, 0.0)
             elif e in known:
                 v = known[e][p.name]
@@ -324,15 +329,28 @@ class _Data:
         self.data = np.ascontiguousarray(self.meas.data)
 
 
+def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, float]):
+    """``spec, X, y, t_rows`` of a model; effects with an onset are zero before it."""
+    spec = RegressionSpec(effects=tuple(model), equation=data.equation, known=known or {})
+    X, y = regression_arrays(spec, data.data, data.ip)
+    t_rows = np.repeat(data.meas.t, spec.rows_per_sample)
+    for e, tc in onsets.items():
+        cols = [spec.columns.index(c) for c in spec.groups[e]]
+        X[np.ix_(t_rows < tc, cols)] = 0.0
+    return spec, X, y, t_rows
+
+
 def compare(
     data: _Data,
     model: Sequence[str],
     known: dict | None = None,
+    onsets: dict[str, float] | None = None,
     *,
     simulate: bool = True,
 ) -> Comparison:
-    spec = RegressionSpec(effects=tuple(model), equation=data.equation, known=known or {})
-    X, y = regression_arrays(spec, data.data, data.ip)
+    """Fit ``model`` (equation error) and, with ``simulate``, run it free (output error)."""
+    onsets = dict(onsets or {})
+    spec, X, y, _ = _design(data, model, known or {}, onsets)
     est = spec.estimator().fit(X, y)
     coef = est.coefficients()
     resid = y - X @ coef
@@ -344,7 +362,7 @@ def compare(
         model=tuple(model), columns=spec.columns, coefficients=coef, standard_errors=est.standard_errors(),
         physical=physical, energy=J, rms=math.sqrt(J / len(y)), r2=1.0 - J / tss if tss > 0 else 0.0,
         n_rows=len(y), n_params=int(est.identifiable().sum()), fit_x=float("nan"), fit_y=float("nan"),
-        fit_bands=[], significance=sig, residual=resid,
+        fit_bands=[], significance=sig, residual=resid, onsets=onsets,
     )
     if simulate:
         _free_run(comp, data, spec.known)
@@ -352,14 +370,26 @@ def compare(
 
 
 def _free_run(comp: Comparison, data: _Data, known: dict) -> None:
+    """Output-error simulation, split where an effect appears (it is absent before)."""
     m = data.meas
+    cuts = sorted({tc for tc in comp.onsets.values() if m.t[0] < tc < m.t[-1]})
+    bounds = [0, *(int(np.searchsorted(m.t, tc)) for tc in cuts), len(m) - 1]
+    state = (m.theta_x[0], m.theta_y[0], m.theta_x_dot[0], m.theta_y_dot[0])
+    pieces = []
     try:
-        params = _model_params(comp.model, comp.physical, data.ip, known)
-        sim = free_run(params, m.t, m.phi, m.phi_dot, (m.theta_x[0], m.theta_y[0], m.theta_x_dot[0], m.theta_y_dot[0]))
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            if b <= a:
+                continue
+            absent = {e for e, tc in comp.onsets.items() if tc > m.t[a]}
+            params = _model_params(comp.model, comp.physical, data.ip, known, absent)
+            seg = free_run(params, m.t[a : b + 1], m.phi[a : b + 1], m.phi_dot[a : b + 1], state)
+            pieces.append(seg.data if not pieces else seg.data[1:])
+            state = tuple(seg.data[-1, 4:8])
     except SimulationError:
         comp.diverged = True
         comp.fit_x = comp.fit_y = -100.0
         return
+    sim = Measurements(np.vstack(pieces))
     comp.simulated = sim
     comp.fit_x = _fit_percent(m.theta_x, sim.theta_x)
     comp.fit_y = _fit_percent(m.theta_y, sim.theta_y)
@@ -467,6 +497,7 @@ class Candidate:
     relevant: bool
     correlation: float           # multiple correlation of the residual with its columns
     order_overlap: float         # cosine similarity of order spectra (residual vs columns)
+    onset: float | None          # the effect appears at this time (None: present throughout)
     story: str
     comparison: Comparison = field(repr=False)
 
@@ -475,7 +506,8 @@ class Candidate:
             "effect": self.effect, "F": self.F, "log10_p": self.log10_p, "rms_after": self.rms_after,
             "fit_percent_after": self.fit_percent_after, "energy_drop": self.energy_drop,
             "fit_gain": self.fit_gain, "significant": self.significant, "relevant": self.relevant,
-            "correlation": self.correlation, "order_overlap": self.order_overlap, "story": self.story,
+            "correlation": self.correlation, "order_overlap": self.order_overlap, "onset": self.onset,
+            "story": self.story,
         }
 
 
@@ -486,6 +518,54 @@ def _order_profile(data: _Data, values: np.ndarray) -> np.ndarray:
     return amp.mean(axis=0) if amp.size else np.zeros(1)
 
 
+GRID = 160  # change-point candidates per scan (the Bonferroni factor of the scan)
+
+
+def _scan(A: np.ndarray, t_rows: np.ndarray, t_grid: np.ndarray, zero_pre, zero_suf) -> np.ndarray:
+    """Residual energy of ``A = [X y]`` with columns ``zero_pre`` absent before each
+    ``t_c`` and ``zero_suf`` absent after it, for every ``t_c`` in ``t_grid``.
+
+    One forward and one backward recursive-QR pass give the factors of every prefix
+    and suffix; zeroing columns of a factor zeroes them in its rows; stacking the two
+    factors and re-triangularising gives the split model's energy (O(n^3) per t_c).
+    """
+    cuts = np.searchsorted(t_rows, t_grid)
+    n = A.shape[1] - 1
+    pre, fwd, last = [], RecursiveQR(n), 0
+    for c in cuts:
+        fwd.update_many(A[last:c, :-1], A[last:c, -1])
+        pre.append(fwd.R.copy())
+        last = c
+    suf, bwd, last = [None] * len(cuts), RecursiveQR(n), len(A)
+    for i in range(len(cuts) - 1, -1, -1):
+        bwd.update_many(A[cuts[i] : last, :-1], A[cuts[i] : last, -1])
+        suf[i] = bwd.R.copy()
+        last = cuts[i]
+    J = np.empty(len(cuts))
+    for i in range(len(cuts)):
+        top, bot = pre[i].copy(), suf[i].copy()
+        top[:, list(zero_pre)] = 0.0
+        bot[:, list(zero_suf)] = 0.0
+        # drop columns that are zero on both sides (not identifiable anywhere)
+        J[i] = np.linalg.qr(np.vstack([top, bot]), mode="r")[-1, -1] ** 2
+    return J
+
+
+def _grid(data: _Data) -> np.ndarray:
+    t = data.meas.t
+    return np.linspace(t[0], t[-1], GRID + 2)[1:-1]
+
+
+def _appear_scan(data: _Data, base: Comparison, name: str, known: dict) -> tuple[float, float]:
+    """Best onset ``t_c`` for ``name`` appearing mid-run, and the energy with it."""
+    spec, X, y, t_rows = _design(data, (*base.model, name), known, base.onsets)
+    cols = [spec.columns.index(c) for c in spec.groups[name]]
+    t_grid = _grid(data)
+    J = _scan(np.column_stack([X, y]), t_rows, t_grid, cols, [])
+    k = int(np.argmin(J))
+    return float(t_grid[k]), float(J[k])
+
+
 def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict, alpha: float,
           min_fit_gain: float, min_energy_drop: float) -> list[Candidate]:
     out = []
@@ -493,17 +573,29 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
     res_profile = _order_profile(data, base.residual)
     for name in candidates:
         kn = {k: v for k, v in known.items() if k != name}
-        comp = compare(data, (*base.model, name), kn)
+        comp = compare(data, (*base.model, name), kn, base.onsets)
         q = comp.n_params - base.n_params
-        F, _, lp, _ = partial_f(base.energy, comp.energy, q, comp.n_rows - comp.n_params)
-        F, lp = float(F), float(lp)
+        dof = comp.n_rows - comp.n_params
+        F, _, lp, _ = partial_f(base.energy, comp.energy, q, dof)
+        F, lp, onset = float(F), float(lp), None
+        # the same effect appearing mid-run (a crack): scan its onset, pay for the scan
+        if q > 0:
+            tc, J_app = _appear_scan(data, base, name, kn)
+            Fa, _, lpa, _ = partial_f(base.energy, J_app, q, dof)
+            lpa = min(0.0, float(lpa) + math.log10(GRID))
+            if lpa < lp and comp.energy > 0 and (comp.energy - J_app) / comp.energy >= min_energy_drop:
+                onset = tc
+                F, lp = float(Fa), lpa
+                comp = compare(data, (*base.model, name), kn, {**base.onsets, name: tc})
         # evidence: correlation of the residual with the candidate's columns, and order overlap
         spec = RegressionSpec(effects=(name,), equation=data.equation, known={})
         Xc, _ = regression_arrays(spec, data.data, data.ip)
+        if onset is not None:
+            Xc[np.repeat(data.meas.t, spec.rows_per_sample) < onset] = 0.0
         est = RecursiveQR(Xc.shape[1]).fit(Xc, base.residual)
         rr = base.residual @ base.residual
         corr = math.sqrt(max(0.0, 1.0 - est.residual_energies()[-1] / rr)) if rr > 0 else 0.0
-        prof = _order_profile(data, Xc[:, 0] if Xc.shape[1] == 1 else Xc @ np.ones(Xc.shape[1]))
+        prof = _order_profile(data, Xc @ np.ones(Xc.shape[1]))
         overlap = float(prof @ res_profile / (np.linalg.norm(prof) * np.linalg.norm(res_profile) + 1e-300))
         drop = (base.energy - comp.energy) / base.energy if base.energy > 0 else 0.0
         gain = comp.fit_percent - base.fit_percent
@@ -513,52 +605,27 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
             energy_drop=float(drop), fit_gain=float(gain),
             significant=bool(q > 0 and lp < math.log10(alpha / n_cand)),
             relevant=bool(gain >= min_fit_gain or drop >= min_energy_drop),
-            correlation=float(corr), order_overlap=overlap,
+            correlation=float(corr), order_overlap=overlap, onset=onset,
             story=f"{eff.cause}. Signature: {eff.signature}.", comparison=comp,
         ))
-    out.sort(key=lambda c: (-c.log10_p if np.isfinite(c.log10_p) else 0.0, c.F), reverse=True)
+    out.sort(key=lambda c: (c.log10_p, -c.F))
     return out
 
 
-def _onset(data: _Data, comp: Comparison, effect: str, known: dict, alpha: float, grid: int = 160) -> float | None:
-    """Change-point scan of ``effect``'s coefficient (before/after ``t_c``)."""
-    spec = RegressionSpec(effects=comp.model, equation=data.equation, known=known)
-    X, y = regression_arrays(spec, data.data, data.ip)
+def _change_time(data: _Data, comp: Comparison, effect: str, known: dict, alpha: float,
+                 min_energy_drop: float) -> float | None:
+    """When an effect in the model changes mid-run: split its coefficient at ``t_c``."""
+    spec, X, y, t_rows = _design(data, comp.model, known, comp.onsets)
     cols = [spec.columns.index(c) for c in spec.groups[effect]]
-    other = [j for j in range(X.shape[1]) if j not in cols]
-    order = other + cols
-    A = np.column_stack([X[:, order], y])
-    t_rows = np.repeat(data.meas.t, spec.rows_per_sample)
-    t_grid = np.linspace(t_rows[0], t_rows[-1], grid + 2)[1:-1]
-    cuts = np.searchsorted(t_rows, t_grid)
-    size = A.shape[1]
+    n = X.shape[1]
+    A = np.column_stack([X, X[:, cols], y])  # the effect's columns twice: before | after
+    after = list(range(n, n + len(cols)))
+    t_grid = _grid(data)
+    J = _scan(A, t_rows, t_grid, after, cols)
+    k = int(np.argmin(J))
     q = len(cols)
-    p0 = len(other)
-    # prefix factors (forward) and suffix factors (backward) at the grid points
-    fwd = RecursiveQR(size - 1)
-    pre, last = [], 0
-    for c in cuts:
-        fwd.update_many(A[last:c, :-1], A[last:c, -1])
-        pre.append(fwd.R.copy())
-        last = c
-    bwd = RecursiveQR(size - 1)
-    suf, last = [None] * len(cuts), len(A)
-    for i in range(len(cuts) - 1, -1, -1):
-        c = cuts[i]
-        bwd.update_many(A[c:last, :-1], A[c:last, -1])
-        suf[i] = bwd.R.copy()
-        last = c
-    J_split = np.empty(len(cuts))
-    for i in range(len(cuts)):
-        Rp, Rs = pre[i], suf[i]
-        top = np.hstack([Rp[:, :p0], Rp[:, p0 : p0 + q], np.zeros((size, q)), Rp[:, -1:]])
-        bot = np.hstack([Rs[:, :p0], np.zeros((size, q)), Rs[:, p0 : p0 + q], Rs[:, -1:]])
-        Rc = np.linalg.qr(np.vstack([top, bot]), mode="r")
-        J_split[i] = Rc[-1, -1] ** 2
-    k = int(np.argmin(J_split))
-    J_one = comp.energy
-    F, _, lp, _ = partial_f(J_one, J_split[k], q, len(y) - comp.n_params - q)
-    if lp < math.log10(alpha / grid) and (J_one - J_split[k]) / J_one >= 0.05:
+    _, _, lp, _ = partial_f(comp.energy, J[k], q, len(y) - comp.n_params - q)
+    if float(lp) + math.log10(GRID) < math.log10(alpha) and (comp.energy - J[k]) / comp.energy >= min_energy_drop:
         return float(t_grid[k])
     return None
 
@@ -590,7 +657,8 @@ class Diagnosis:
 
     def add(self, *names: str) -> Comparison:
         """The final model with more effects, compared (one call to add an effect)."""
-        return compare(self.data, Model(self.model).add(*names).effects, _known(self.model + names))
+        model = Model(self.model).add(*names).effects
+        return compare(self.data, model, _known(model), self.after.onsets)
 
     # -------------------------------------------------------------- text/JSON
     def to_dict(self) -> dict:
@@ -967,7 +1035,12 @@ def diagnose(
         remaining.remove(chosen.effect)
     if pbar is not None:
         pbar.close()
-    onset = {e: _onset(data, current, e, _known(current.model), alpha) for e in missing}
+    onset = {
+        e: current.onsets.get(e)
+        if e in current.onsets
+        else _change_time(data, current, e, _known(current.model), alpha, min_energy_drop)
+        for e in missing
+    }
     diag = Diagnosis(
         source=measurements.source, ip=ip, alpha=alpha, equation=equation, t_start=data.t_start,
         start_model=model.effects, model=current.model, missing=missing, onset=onset, rounds=rounds,

@@ -259,8 +259,9 @@ class Simulator:
         # Split the run at parameter jumps: a crack, and chunks for the progress bar.
         breaks = {n_total}
         crack = self.params.crack
+        k_crack = int(round(crack.time / dt)) if crack is not None else None
         if crack is not None and 0 < crack.time < t_end:
-            breaks.add(int(round(crack.time / dt)))
+            breaks.add(k_crack)
         if progress:
             breaks.update(range(0, n_total, max(1, n_total // 100)))
         breaks = sorted(b for b in breaks if b > 0)
@@ -273,7 +274,8 @@ class Simulator:
             t0 = k * dt
             phi0 = run_up.phi0 + run_up.speed0 * t0 + 0.5 * a * t0 * t0
             phid0 = run_up.speed0 + a * t0
-            coef, h = self.coefficients(t0)
+            # from the crack's sample on, D is the cracked one (t0 may fall just before crack.time)
+            coef, h = self.coefficients(crack.time if k_crack is not None and k >= k_crack else t0)
             n = nxt - k
             done = integrate(
                 self.accel, state, t0, phi0, phid0, a, self.params.ip, coef, h,
