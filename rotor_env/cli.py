@@ -346,7 +346,30 @@ def build_parser() -> argparse.ArgumentParser:
     _add_simulate_parser(sub)
     _add_paper_parser(sub)
     _add_diagnose_parsers(sub)
+    _add_plugin_parsers(sub)
     return parser
+
+
+def _add_plugin_parsers(sub) -> None:
+    """Commands of packages built on rotor_env (``agents``: train, evaluate).
+
+    They register under the entry-point group ``rotor_id.commands`` so that this
+    package never imports them (dependencies point one way: agents -> rotor_env).
+    """
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group="rotor_id.commands"):
+        try:
+            ep.load()(sub)
+        except ImportError as exc:  # e.g. the agents extra (Stable-Baselines3) not installed
+            p = sub.add_parser(ep.name, help=f"(unavailable: {exc})")
+            p.set_defaults(func=lambda args, exc=exc: _unavailable(args, exc))
+
+
+def _unavailable(args, exc) -> int:
+    print(f"rotor-id {args.command}: needs the 'agents' extra (pip install 'rotor-id[agents]'): {exc}",
+          file=sys.stderr)
+    return 2
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -66,8 +66,10 @@ class IdentificationCore:
         self.ip = 0.3
 
     def _layout(self) -> dict[str, slice]:
-        out: dict[str, slice] = {}
-        pos = 0
+        # the inertia ratio the regression uses (known geometry) comes first: a model-based
+        # policy needs it with the identified stiffness to place the critical speed
+        out: dict[str, slice] = {"ip": slice(0, 1)}
+        pos = 1
         for name, cols in self.spec.groups.items():
             out[f"{name}.coefficients"] = slice(pos, pos + len(cols))
             out[f"{name}.significant"] = slice(pos + len(cols), pos + len(cols) + 1)
@@ -85,7 +87,7 @@ class IdentificationCore:
         low = np.full(self.size, -_BIG, dtype=np.float32)
         high = np.full(self.size, _BIG, dtype=np.float32)
         for key, sl in self.layout.items():
-            if key.endswith(".significant"):
+            if key.endswith(".significant") or key == "ip":
                 low[sl], high[sl] = 0.0, 1.0
             elif key.endswith(".log10_p"):
                 low[sl], high[sl] = -_BIG, 0.0
@@ -96,9 +98,12 @@ class IdentificationCore:
         self.ip = float(ip)
 
     def update(self, measurements: np.ndarray, control: np.ndarray | None = None) -> None:
-        if measurements.shape[0] == 0:
+        data = np.asarray(measurements, dtype=float)
+        # an env that diverged pads the step's remaining samples with NaN: skip those
+        data = data[np.isfinite(data).all(axis=1)]
+        if data.shape[0] == 0:
             return
-        X, y = build_rows(self.spec, np.ascontiguousarray(measurements, dtype=float), self.ip, control)
+        X, y = build_rows(self.spec, np.ascontiguousarray(data), self.ip, control)
         self.estimator.update_many(X, y)
 
     def significance(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -128,7 +133,8 @@ class IdentificationCore:
     def features(self) -> np.ndarray:
         coef, log10_p, sig = self.significance()
         out = np.empty(self.size, dtype=np.float32)
-        pos = 0
+        out[0] = self.ip
+        pos = 1
         for g, mask in enumerate(self._masks):
             k = int(mask.sum())
             out[pos : pos + k] = np.clip(coef[mask], -_BIG, _BIG)
@@ -152,16 +158,17 @@ class IdentificationWrapper(gym.Wrapper):
 
     Observation
     -----------
-    A flat ``Box(float32)``: the wrapped env's observation, then for each effect (in
-    the order of ``effects``) its coefficient(s) and a significance flag, then
-    (options) ``log10 p`` per effect and ``log10 J_n`` (the residual energy)::
+    A flat ``Box(float32)``: the wrapped env's observation, the inertia ratio ``ip`` the
+    regression uses (known), then for each effect (in the order of ``effects``) its
+    coefficient(s) and a significance flag, then (options) ``log10 p`` per effect and
+    ``log10 J_n`` (the residual energy)::
 
-        [ env obs | stiffness: k, flag | unbalance: tau cos(beta), tau sin(beta), flag |
+        [ env obs | ip | stiffness: k, flag | unbalance: tau cos(beta), tau sin(beta), flag |
           asymmetry: D, flag | viscous_damping: c, flag |
           nonlinear_stiffness: k21, k12, k03, flag | structural_damping: h, flag |
           (log10 p per effect) | (log10 J) ]
 
-    ``wrapper.layout`` maps ``"<effect>.coefficients"``, ``"<effect>.significant"``,
+    ``wrapper.layout`` maps ``"ip"``, ``"<effect>.coefficients"``, ``"<effect>.significant"``,
     ``"<effect>.log10_p"``, ``"log10_residual_energy"`` to slices of the appended part
     (offset by ``wrapper.offset``).  A flag is 1 when the effect's partial F-test
     (``test="last"``: the full model against the full model without the effect;

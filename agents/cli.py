@@ -1,0 +1,55 @@
+"""``rotor-id train`` and ``rotor-id evaluate`` (plugged into the CLI via entry points)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+
+ENV_IDS = ("rotor_env/RotorRunUp-v0", "rotor_env/RotorBalancing-v0")
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from .training import train
+
+    command = "rotor-id " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["train"] else None
+    out = train(args.env, args.algo, args.steps, identifier=args.identifier, seed=args.seed, out=args.out,
+                hyperparams=args.hyperparams, eval_freq=args.eval_freq, command=command, force=args.force)
+    print(f"saved {out}/model.zip, {out}/vecnormalize.npz and {out}/run.json")
+    return 0
+
+
+def add_train_parser(sub) -> None:
+    p = sub.add_parser("train", help="train a Stable-Baselines3 controller (PPO or SAC)")
+    p.add_argument("--env", required=True, choices=ENV_IDS)
+    p.add_argument("--algo", default="ppo", choices=("ppo", "sac"))
+    p.add_argument("--steps", type=int, default=100_000, help="environment steps (default 100000)")
+    p.add_argument("--identifier", action=argparse.BooleanOptionalAction, default=True,
+                   help="observe the identified parameters (IdentificationWrapper; default on)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="runs/policy", metavar="DIR")
+    p.add_argument("--hyperparams", metavar="FILE.yml", help="hyper-parameter table (default: agents/hyperparams.yml)")
+    p.add_argument("--eval-freq", type=int, default=10_000, help="evaluate every N steps")
+    p.add_argument("--force", action="store_true", help="overwrite a non-empty --out folder")
+    p.set_defaults(func=_cmd_train)
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from .evaluation import evaluate, format_table
+
+    result = evaluate(args.env, args.episodes, progress=sys.stderr.isatty() and not args.json)
+    if args.json:
+        print(json.dumps({"agents": result["agents"]}))
+    else:
+        print(f"{args.env}: {args.episodes} held-out rotors\n")
+        print(format_table(result))
+    return 0
+
+
+def add_evaluate_parser(sub) -> None:
+    p = sub.add_parser("evaluate", help="compare all agents on held-out randomised rotors")
+    p.add_argument("--env", required=True, choices=ENV_IDS)
+    p.add_argument("--episodes", type=int, default=50)
+    p.add_argument("--json", action="store_true", help="print {'agents': {name: metrics}} as JSON")
+    p.set_defaults(func=_cmd_evaluate)

@@ -1,0 +1,168 @@
+"""Training Stable-Baselines3 controllers on the rotor environments.
+
+``rotor-id train --env ID --algo ppo|sac --steps N [--identifier/--no-identifier]``
+builds ``n_envs`` environments (each in a ``Monitor``; with the identification
+wrapper unless ``--no-identifier``), normalises observations and rewards
+(``VecNormalize``, statistics saved beside the model), evaluates on held-out seeds
+during training (``EvalCallback``), shows a progress bar, and saves ``model.zip``,
+``vecnormalize.npz`` (JSON/npz, no pickle) and ``run.json`` (the exact command, seed
+and hyper-parameters) in the output folder.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+import rotor_env  # noqa: F401 - registers the environments
+from rotor_env import IdentificationWrapper
+
+__all__ = ["ALGOS", "TrainedPolicy", "load_hyperparams", "make_env", "train"]
+
+ALGOS = ("ppo", "sac")
+#: seeds of the evaluation rotors during training (held out from the training seeds)
+EVAL_SEED = 10_000
+
+
+def load_hyperparams(env_id: str, algo: str, path: str | Path | None = None) -> dict:
+    import yaml
+
+    text = Path(path).read_text() if path else resources.files("agents").joinpath("hyperparams.yml").read_text()
+    table = yaml.safe_load(text)
+    if env_id not in table:
+        raise ValueError(f"no hyper-parameters for {env_id!r}; known: {', '.join(table)}")
+    if algo not in table[env_id]:
+        raise ValueError(f"no hyper-parameters for {algo!r} on {env_id}; known: {', '.join(table[env_id])}")
+    return dict(table[env_id][algo])
+
+
+def make_env(env_id: str, identifier: bool, **env_kwargs) -> gym.Env:
+    env = gym.make(env_id, **env_kwargs)
+    if identifier:
+        env = IdentificationWrapper(env)
+    return env
+
+
+def _vec_env(env_id: str, identifier: bool, n_envs: int, seed: int, monitor: bool = True):
+    from stable_baselines3.common.monitor import Monitor
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    def factory(i):
+        def _make():
+            env = make_env(env_id, identifier)
+            env = Monitor(env)
+            env.reset(seed=seed + i)
+            return env
+
+        return _make
+
+    venv = DummyVecEnv([factory(i) for i in range(n_envs)])
+    venv.seed(seed)
+    return venv
+
+
+def save_vecnormalize(vn, path: Path) -> None:
+    """VecNormalize statistics as ``.npz`` (no pickle)."""
+    np.savez(
+        path,
+        obs_mean=vn.obs_rms.mean, obs_var=vn.obs_rms.var, obs_count=np.array(vn.obs_rms.count),
+        ret_mean=np.array(vn.ret_rms.mean), ret_var=np.array(vn.ret_rms.var),
+        ret_count=np.array(vn.ret_rms.count), clip_obs=np.array(vn.clip_obs),
+        epsilon=np.array(vn.epsilon),
+    )
+
+
+@dataclass
+class TrainedPolicy:
+    """A trained SB3 model with its observation normalisation, as a ``predict`` policy."""
+
+    model: object
+    obs_mean: np.ndarray
+    obs_var: np.ndarray
+    clip_obs: float
+    epsilon: float
+    name: str = "sb3"
+
+    def reset(self) -> None:
+        pass
+
+    def normalize(self, obs: np.ndarray) -> np.ndarray:
+        return np.clip((obs - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon), -self.clip_obs, self.clip_obs)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        obs = self.normalize(np.asarray(observation, dtype=np.float32)).astype(np.float32)
+        return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+
+    @classmethod
+    def load(cls, folder: str | Path, name: str = "sb3") -> TrainedPolicy:
+        from stable_baselines3 import PPO, SAC
+
+        folder = Path(folder)
+        meta = json.loads((folder / "run.json").read_text())
+        algo = {"ppo": PPO, "sac": SAC}[meta["algo"]]
+        model = algo.load(folder / "model.zip", device="cpu")
+        with np.load(folder / "vecnormalize.npz", allow_pickle=False) as z:
+            return cls(model, z["obs_mean"], z["obs_var"], float(z["clip_obs"]), float(z["epsilon"]), name)
+
+
+def train(
+    env_id: str,
+    algo: str = "ppo",
+    steps: int = 100_000,
+    *,
+    identifier: bool = True,
+    seed: int = 0,
+    out: str | Path = "runs/policy",
+    hyperparams: str | Path | None = None,
+    eval_freq: int = 10_000,
+    eval_episodes: int = 5,
+    progress: bool | None = None,
+    command: str | None = None,
+    force: bool = False,
+) -> Path:
+    """Train, evaluate during training, save the model and its normalisation statistics."""
+    from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.callbacks import EvalCallback
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    if algo not in ALGOS:
+        raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
+    if steps < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}")
+    out = Path(out)
+    if out.exists() and any(out.iterdir()) and not force:
+        raise FileExistsError(f"{out} exists and is not empty; use --force to overwrite it")
+    out.mkdir(parents=True, exist_ok=True)
+    hp = load_hyperparams(env_id, algo, hyperparams)
+    n_envs = int(hp.pop("n_envs", 1))
+    policy = hp.pop("policy", "MlpPolicy")
+    venv = VecNormalize(_vec_env(env_id, identifier, n_envs, seed), norm_obs=True, norm_reward=True)
+    eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed), norm_obs=True,
+                            norm_reward=False, training=False)
+    cls = {"ppo": PPO, "sac": SAC}[algo]
+    model = cls(policy, venv, seed=seed, verbose=0, device="cpu", **hp)
+    callback = EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(1, eval_freq // n_envs),
+                            deterministic=True, verbose=0, log_path=str(out / "eval"))
+    # EvalCallback syncs the normalisation statistics from the training env
+    if progress is None:
+        progress = sys.stderr.isatty()
+    model.learn(total_timesteps=int(steps), callback=callback, progress_bar=bool(progress))
+    model.save(out / "model.zip")
+    save_vecnormalize(venv, out / "vecnormalize.npz")
+    run = {
+        "env": env_id, "algo": algo, "steps": int(steps), "identifier": identifier, "seed": seed,
+        "n_envs": n_envs, "policy": policy, "hyperparams": hp,
+        "command": command or f"rotor-id train --env {env_id} --algo {algo} --steps {steps} "
+        f"{'--identifier' if identifier else '--no-identifier'} --seed {seed} --out {out}",
+        "eval_mean_reward": float(callback.last_mean_reward) if callback.last_mean_reward > -np.inf else None,
+    }
+    (out / "run.json").write_text(json.dumps(run, indent=2))
+    venv.close()
+    eval_env.close()
+    return out
