@@ -305,9 +305,10 @@ def regression_arrays(
     for name, vals in spec.known.items():
         eff = EFFECTS[name]
         Xy, Xx = eff.regressors(*args)
-        c = np.asarray(eff.to_coefficients(vals), dtype=float)
-        y1 = y1 - Xy @ c
-        y2 = y2 - Xx @ c
+        # one coefficient at a time, in the compiled builder's order: bit-identical rows
+        for q, c in enumerate(eff.to_coefficients(vals)):
+            y1 = y1 - float(c) * Xy[:, q]
+            y2 = y2 - float(c) * Xx[:, q]
     blocks_y, blocks_x = [], []
     for name, idx in zip(spec.effects, spec._keep, strict=True):
         Xy, Xx = EFFECTS[name].regressors(*args)

@@ -1,0 +1,115 @@
+"""Speed of ``rotor_env.diagnosis.diagnose`` on a 40 000-sample file.
+
+The data: the paper's Table-1 run (t in [0, 400], dt = 0.01: 40 001 rows) with
+Gaussian noise of std 5e-4 on the six inclination channels, written to a temporary
+CSV and read back with ``load_measurements`` (as ``rotor-id diagnose FILE`` does).
+The diagnosis starts from its default model (unbalance, viscous damping) with every
+library candidate.
+
+Timed in this process, in this order:
+
+* the loader (best of ``--repeat``);
+* the first ``diagnose`` call, which includes numba's compilation of the free-run
+  simulator and estimator kernels (reported separately, not counted against the
+  target);
+* ``diagnose`` after that warm-up (best and median of ``--repeat``): the number the
+  target (< 5 s) is about;
+* the peer: one batch ``numpy.linalg.lstsq`` of the full model (every library
+  effect, both equations stacked, as the diagnosis regresses) on the same data,
+  regression building and solve timed separately (best of ``--repeat``).
+
+    python benchmarks/diagnosis_speed.py            # prints a Markdown table
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rotor_env.diagnosis import DEFAULT_MODEL, LIBRARY_CANDIDATES, diagnose
+from rotor_env.io import load_measurements
+from rotor_env.params import RotorParams
+from rotor_env.regression import build_regression
+from rotor_env.simulator import simulate
+
+TARGET_S = 5.0
+
+
+def timed(fn, repeat: int) -> tuple[list[float], object]:
+    times, result = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t0)
+    return times, result
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--noise", type=float, default=5e-4, help="noise std on the inclination channels")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the noise")
+    ap.add_argument("--repeat", type=int, default=3, help="timed runs of each step (best of)")
+    args = ap.parse_args(argv)
+
+    params = RotorParams()  # Table 1
+    meas = simulate(params, t_end=400.0, dt=0.01, noise=args.noise, seed=args.seed)
+    candidates = [c for c in LIBRARY_CANDIDATES if c not in DEFAULT_MODEL]
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "table1_noisy.csv"
+        meas.to_file(path)
+        size_mb = path.stat().st_size / 1e6
+        load_times, loaded = timed(lambda: load_measurements(path), args.repeat)
+    assert np.array_equal(loaded.data, meas.data)
+
+    t0 = time.perf_counter()
+    first = diagnose(loaded, DEFAULT_MODEL, candidates=candidates, ip=params.ip)
+    first_s = time.perf_counter() - t0
+    diag_times, result = timed(
+        lambda: diagnose(loaded, DEFAULT_MODEL, candidates=candidates, ip=params.ip), args.repeat
+    )
+    assert result.missing == first.missing
+
+    full = (*DEFAULT_MODEL, *candidates)
+    build_times, reg = timed(
+        lambda: build_regression(loaded, full, ip=params.ip, equation="both"), args.repeat
+    )
+    solve_times, _ = timed(lambda: np.linalg.lstsq(reg.X, reg.y, rcond=None), args.repeat)
+
+    best = min(diag_times)
+    rows = [
+        ("load_measurements (CSV, 40 001 x 10)", min(load_times), f"{size_mb:.1f} MB file"),
+        ("diagnose, first call (incl. numba compile)", first_s, "not counted against the target"),
+        ("diagnose, after warm-up: best", best,
+         f"target < {TARGET_S:g} s: {'met' if best < TARGET_S else 'NOT met'}"),
+        ("diagnose, after warm-up: median", statistics.median(diag_times), f"{args.repeat} runs"),
+        ("peer: build_regression, full model, both eqs", min(build_times),
+         f"{reg.X.shape[0]} x {reg.X.shape[1]}"),
+        ("peer: one numpy.linalg.lstsq, full model", min(solve_times), "same regression"),
+    ]
+    print(f"Diagnosis speed — {len(loaded)} samples, noise {args.noise:g} (seed {args.seed}), "
+          f"start model {', '.join(DEFAULT_MODEL)}, candidates {', '.join(candidates)}")
+    print(f"found missing: {', '.join(result.missing) or 'nothing'}")
+    print(f"{platform.python_implementation()} {platform.python_version()}, numpy {np.__version__}, "
+          f"{os.cpu_count()} CPUs, {platform.machine()}")
+    print()
+    print("| step | time (s) | note |")
+    print("|---|---:|---|")
+    for step, secs, note in rows:
+        print(f"| {step} | {secs:.3f} | {note} |")
+    peer = min(build_times) + min(solve_times)
+    print()
+    print(f"diagnose / (build + one lstsq) = {best / peer:.0f}x; "
+          f"diagnose / load = {best / min(load_times):.1f}x")
+    return 0 if best < TARGET_S else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
