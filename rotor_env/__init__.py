@@ -1,1 +1,71 @@
-"""rotor_env — the accelerating rotor: effects, simulator, Gymnasium environments, CLI."""
+"""rotor_env — the accelerating rotor: effects, simulator, Gymnasium environments, CLI.
+
+>>> from rotor_env import simulate, RotorParams, diagnose
+>>> meas = simulate(RotorParams(), t_end=50.0)
+>>> len(meas)
+5001
+"""
+
+from .diagnosis import Diagnosis, Model, diagnose, fit
+from .effects import EFFECTS, Effect, Parameter, get_effect, register_effect
+from .io import MeasurementError, load_measurements
+from .measurements import COLUMNS, Measurements
+from .params import Crack, RotorParams
+from .regression import Regression, RegressionSpec, build_regression
+from .simulator import RunUp, SimulationError, Simulator, free_run, simulate
+from .wrappers import IdentificationWrapper, VectorIdentificationWrapper
+
+__all__ = [
+    "COLUMNS",
+    "EFFECTS",
+    "ENV_IDS",
+    "Crack",
+    "Diagnosis",
+    "Effect",
+    "IdentificationWrapper",
+    "MeasurementError",
+    "Measurements",
+    "Model",
+    "Parameter",
+    "Regression",
+    "RegressionSpec",
+    "RotorParams",
+    "RunUp",
+    "SimulationError",
+    "Simulator",
+    "VectorIdentificationWrapper",
+    "build_regression",
+    "diagnose",
+    "fit",
+    "free_run",
+    "get_effect",
+    "load_measurements",
+    "register_effect",
+    "simulate",
+]
+
+#: Gymnasium ids registered on import (entry points are strings: nothing heavy is imported).
+ENV_IDS: tuple[str, ...] = ("rotor_env/RotorRunUp-v0", "rotor_env/RotorBalancing-v0")
+
+
+def _register_envs() -> None:
+    try:
+        import gymnasium
+    except ImportError:  # gymnasium is optional: the simulator and identifier work without
+        return
+    entry = {
+        "rotor_env/RotorRunUp-v0": "RotorRunUp",
+        "rotor_env/RotorBalancing-v0": "RotorBalancing",
+    }
+    module = {"RotorRunUp": "run_up", "RotorBalancing": "balancing"}
+    for env_id, name in entry.items():
+        if env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=env_id,
+            entry_point=f"rotor_env.envs.{module[name]}:{name}Env",
+            vector_entry_point=f"rotor_env.envs.vector:{name}VectorEnv",
+        )
+
+
+_register_envs()

@@ -134,7 +134,7 @@ def effect_from_function(fn: Callable, name: str | None = None) -> Effect:
     equation only; the second equation's column is then taken as zero.
     """
     name = name or fn.__name__
-    probe = np.random.default_rng(0).normal(size=(8, 5)) * 0.1
+    probe = np.random.default_rng(0).normal(size=(7, 5)) * 0.1  # phi .. w_y; ip follows
     try:
         out = fn(*probe, 0.3)
     except Exception as exc:
@@ -840,7 +840,7 @@ class Diagnosis:
         ax.set_title("before and after adding the missing effects")
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = ax2.get_legend_handles_labels()
-        ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="lower right")
+        ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="lower right")  # on top of both bar sets
         return fig
 
     _step_comparisons: list = field(default_factory=list, repr=False)

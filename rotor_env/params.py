@@ -90,6 +90,11 @@ class RotorParams:
             return values[name]
         raise AttributeError(name)
 
+    def __reduce__(self):
+        # the mappingproxy of ``values`` can be neither copied nor pickled: rebuild instead
+        # (SB3's DummyVecEnv deep-copies infos, AsyncVectorEnv pickles them)
+        return RotorParams, (self.ip, dict(self.values), self.effects, self.crack)
+
     def replace(self, **changes) -> RotorParams:
         """A copy with some parameters changed (``ip``, ``crack`` or effect parameters)."""
         ip = changes.pop("ip", self.ip)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numba import njit
@@ -137,7 +138,9 @@ class RegressionSpec:
     def rows_per_sample(self) -> int:
         return 2 if self.equation == "both" else 1
 
+    @cached_property
     def known_coefficients(self) -> np.ndarray:
+        """The known effects' coefficients, in builder order (computed once)."""
         return np.array(
             [c for name, vals in self.known.items() for c in EFFECTS[name].to_coefficients(vals)],
             dtype=float,
@@ -170,6 +173,7 @@ class RegressionSpec:
 
 
 _BUILDERS: dict[tuple, object] = {}
+_ZERO_MOMENTS = np.zeros((4096, 2))  # read-only use: no known moments (the builder reads rows < m)
 
 
 def _compile_builder(spec: RegressionSpec):
@@ -259,8 +263,11 @@ def build_rows(
         y = np.empty(rows)
     else:
         X, y = out
-    mom = np.zeros((m, 2)) if control is None else np.broadcast_to(np.asarray(control, float), (m, 2))
-    spec.builder()(data, float(ip), spec.known_coefficients(), np.ascontiguousarray(mom), X, y)
+    if control is None:
+        mom = _ZERO_MOMENTS if m <= len(_ZERO_MOMENTS) else np.zeros((m, 2))
+    else:
+        mom = np.ascontiguousarray(np.broadcast_to(np.asarray(control, float), (m, 2)))
+    spec.builder()(data, float(ip), spec.known_coefficients, mom, X, y)
     return X, y
 
 

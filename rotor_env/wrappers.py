@@ -7,9 +7,11 @@ from collections.abc import Sequence
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from numba import njit
 from scipy import special
 
 from identifier import RecursiveQR
+from identifier._kernels import clean_factor, nested_energies, snapshot, update_rows
 
 from .regression import DEFAULT_EFFECTS, RegressionSpec, build_rows
 
@@ -59,10 +61,20 @@ class IdentificationCore:
         self.effects = tuple(self.spec.groups)
         self._masks = self.estimator._group_masks()
         # for the nested test: the number of columns before each effect
-        self._starts = np.cumsum([0] + [len(g) for g in groups])[:-1]
-        self._ends = self._starts + np.array([len(g) for g in groups])
+        self._starts = np.cumsum([0] + [len(g) for g in groups])[:-1].astype(np.int64)
+        self._ends = (self._starts + np.array([len(g) for g in groups])).astype(np.int64)
         self.layout = self._layout()
         self.size = max(s.stop for s in self.layout.values())
+        self._p_pos = 1 + sum(len(g) + 1 for g in groups)
+        G, n = self._masks.shape
+        # work buffers of the hot path (never handed out)
+        self._buf = {"coef": np.empty(n), "F": np.empty(G), "d1": np.empty(G), "d2": np.empty(G),
+                     "ok": np.empty(G, dtype=np.bool_), "ident": np.empty(n, dtype=np.bool_)}
+        self._one_minus_alpha = 1.0 - self.alpha
+        self._X = np.empty((0, self.spec.n_columns))
+        self._y = np.empty(0)
+        self._zero_mom = np.zeros((256, 2))
+        self._kernel = _step_kernel(self.spec)
         self.ip = 0.3
 
     def _layout(self) -> dict[str, slice]:
@@ -100,56 +112,161 @@ class IdentificationCore:
     def update(self, measurements: np.ndarray, control: np.ndarray | None = None) -> None:
         data = np.asarray(measurements, dtype=float)
         # an env that diverged pads the step's remaining samples with NaN: skip those
-        data = data[np.isfinite(data).all(axis=1)]
+        if not np.isfinite(data).all():
+            data = data[np.isfinite(data).all(axis=1)]
         if data.shape[0] == 0:
             return
         X, y = build_rows(self.spec, np.ascontiguousarray(data), self.ip, control)
-        self.estimator.update_many(X, y)
+        # the rows come from the compiled builder on finite data: skip re-validation (hot path)
+        self.estimator._run(X, y, None, None)
+
+    def step_features(self, measurements: np.ndarray, control: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`update` then :meth:`features`, fused into one compiled call (the hot path).
+
+        Same numbers as the two calls (tested); it only saves the Python overhead.
+        """
+        data = np.asarray(measurements, dtype=float)
+        if data.shape[0] == 0 or not np.isfinite(data).all():
+            self.update(data, control)  # rare: empty or partly diverged step
+            return self.features()
+        data = np.ascontiguousarray(data)
+        m = data.shape[0]
+        rows = m * self.spec.rows_per_sample
+        if self._X.shape[0] != rows:
+            self._X = np.empty((rows, self.spec.n_columns))
+            self._y = np.empty(rows)
+        if control is None:
+            mom = np.zeros((m, 2)) if m > len(self._zero_mom) else self._zero_mom
+        else:
+            mom = np.ascontiguousarray(np.broadcast_to(np.asarray(control, float), (m, 2)))
+        est, b = self.estimator, self._buf
+        self._kernel(
+            data, self.ip, self.spec.known_coefficients, mom, self._X, self._y, est.R, est._col_sq, est._sums,
+            est.forgetting, est.rtol, self._masks, self.test == "last", self._starts, self._ends,
+            float(self.min_samples), b["coef"], b["F"], b["d1"], b["d2"], b["ok"], b["ident"],
+        )
+        return self._finish(b["F"], b["d1"], b["d2"], b["ok"], b["coef"])
+
+    def _test_inputs(self):
+        """``(F, d1, d2, ok, coef)`` of every effect's test, from one compiled pass (buffers)."""
+        est = self.estimator
+        b = self._buf
+        _test_stats(est.R, est._col_sq, est.rtol, self._masks, est.effective_samples, self.test == "last",
+                    self._starts, self._ends, est.n_samples >= self.min_samples,
+                    b["coef"], b["F"], b["d1"], b["d2"], b["ok"], b["ident"])
+        return b["F"], b["d1"], b["d2"], b["ok"], b["coef"]
 
     def significance(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(coefficients, log10_p, significant)`` for the current data."""
-        est = self.estimator
-        J_without, J_full, coef, ident = est.effect_energies()
-        m_eff = est.effective_samples
-        p = float(ident.sum())
-        if self.test == "last":
-            Jr = J_without
-            d1 = (self._masks & ident).sum(axis=1).astype(float)
-            d2 = np.full(len(d1), m_eff - p)
-            Jf = np.full(len(d1), J_full)
-        else:  # the paper's nested sequence, an effect's columns added as a block
-            E = est.residual_energies()
-            Jr, Jf = E[self._starts], E[self._ends]
-            cum = np.concatenate([[0], np.cumsum(ident)])
-            d1 = (cum[self._ends] - cum[self._starts]).astype(float)
-            d2 = m_eff - cum[self._ends].astype(float)
-        ok = (d1 > 0) & (d2 > 0) & (est.n_samples >= self.min_samples)
-        with np.errstate(all="ignore"):
-            F = np.where(ok, ((Jr - Jf) / np.where(ok, d1, 1)) / (np.maximum(Jf, 1e-300) / np.where(ok, d2, 1)), 0.0)
-            sf = np.where(ok, special.fdtrc(np.where(ok, d1, 1), np.where(ok, d2, 1), np.maximum(F, 0.0)), 1.0)
-        log10_p = np.log10(np.maximum(sf, 1e-300))
-        return coef, log10_p, ok & (sf < self.alpha)
+        """``(coefficients, log10_p, significant)`` for the current data (fresh arrays)."""
+        F, d1, d2, ok, coef = self._test_inputs()
+        sf = np.where(ok, special.fdtrc(d1, d2, F), 1.0)
+        return coef.copy(), np.log10(np.maximum(sf, 1e-300)), ok & (sf < self.alpha)
 
     def features(self) -> np.ndarray:
-        coef, log10_p, sig = self.significance()
+        """The appended observation part (a new float32 array)."""
+        return self._finish(*self._test_inputs())
+
+    def _finish(self, F, d1, d2, ok, coef) -> np.ndarray:
         out = np.empty(self.size, dtype=np.float32)
-        out[0] = self.ip
-        pos = 1
-        for g, mask in enumerate(self._masks):
-            k = int(mask.sum())
-            out[pos : pos + k] = np.clip(coef[mask], -_BIG, _BIG)
-            out[pos + k] = float(sig[g])
-            pos += k + 1
+        # p < alpha  <=>  F > F_crit(alpha): one inverse-cdf call decides every flag exactly
+        sig = ok & (F > special.fdtri(d1, d2, self._one_minus_alpha))
+        _fill(out, self.ip, coef, self._masks, sig)
+        pos = self._p_pos
         if self.include_p_values:
-            out[pos : pos + len(log10_p)] = np.clip(log10_p, -_BIG, 0.0)
-            pos += len(log10_p)
+            sf = np.where(ok, special.fdtrc(d1, d2, F), 1.0)
+            out[pos : pos + len(F)] = np.log10(np.maximum(sf, 1e-300))
+            pos += len(F)
         if self.include_energy:
             J = self.estimator.residual_energies()[-1]
-            out[pos] = np.clip(np.log10(max(J, 1e-30)), -_BIG, _BIG)
+            out[pos] = np.log10(max(J, 1e-30))
         return out
 
 
-class IdentificationWrapper(gym.Wrapper):
+@njit(cache=True)
+def _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, enough, coef, F, d1, d2, ok, ident) -> None:
+    """Partial F and degrees of freedom of each effect's test, in one pass.
+
+    ``last``: the full model against it without the effect; otherwise the nested
+    sequence with the effect's columns added as a block.  ``ok`` is False where the
+    test cannot be made (no identifiable column, no degrees of freedom, or not
+    ``enough`` samples yet); there ``F = 0`` and ``d1 = d2 = 1`` (harmless for scipy).
+    """
+    G, n = masks.shape
+    J_without = np.empty(G)
+    J_full = snapshot(R, col_sq, rtol, masks, ident, coef, J_without)
+    Jr = np.empty(G)
+    Jf = np.empty(G)
+    if last:
+        p = 0
+        for k in range(n):
+            p += 1 if ident[k] else 0
+        for g in range(G):
+            q = 0
+            for k in range(n):
+                q += 1 if (masks[g, k] and ident[k]) else 0
+            Jr[g], Jf[g], d1[g], d2[g] = J_without[g], J_full, q, m_eff - p
+    else:
+        size = n + 1
+        work = np.empty((size, size))
+        E = np.empty(size)
+        clean_factor(R, ident, work, np.empty(size))
+        nested_energies(work, E)
+        for g in range(G):
+            q = 0
+            before = 0
+            for k in range(ends[g]):
+                if ident[k]:
+                    q += 1 if k >= starts[g] else 0
+                    before += 1
+            Jr[g], Jf[g], d1[g], d2[g] = E[starts[g]], E[ends[g]], q, m_eff - before
+    for g in range(G):
+        ok[g] = enough and d1[g] > 0 and d2[g] > 0
+        if ok[g]:
+            F[g] = max(Jr[g] - Jf[g], 0.0) / d1[g] / (max(Jf[g], 1e-300) / d2[g])
+        else:
+            F[g], d1[g], d2[g] = 0.0, 1.0, 1.0
+
+
+_STEP_KERNELS: dict = {}
+
+
+def _step_kernel(spec: RegressionSpec):
+    """Builder + time update + tests in one compiled function (one per regression spec)."""
+    key = (spec.effects, spec.equation, tuple(spec.known))
+    if key in _STEP_KERNELS:
+        return _STEP_KERNELS[key]
+    build = spec.builder()
+    n = spec.n_columns
+
+    @njit
+    def kernel(data, ip, kc, mom, X, y, R, col_sq, sums, lam, rtol, masks, last, starts, ends,
+               min_samples, coef, F, d1, d2, ok, ident):
+        build(data, ip, kc, mom, X, y)
+        update_rows(R, col_sq, sums, X, y, lam, rtol, np.empty((0, n + 1)), np.empty(0, dtype=np.int64),
+                    np.empty((0, 0, n)))
+        m_eff = sums[1] * sums[1] / sums[2] if sums[2] > 0 else 0.0
+        _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, sums[0] >= min_samples,
+                    coef, F, d1, d2, ok, ident)
+
+    _STEP_KERNELS[key] = kernel
+    return kernel
+
+
+@njit(cache=True)
+def _fill(out, ip, coef, masks, sig) -> None:
+    """``[ip | coefficients_e..., flag_e | ...]`` into ``out`` (clipped to +-1e6)."""
+    out[0] = ip
+    pos = 1
+    for g in range(masks.shape[0]):
+        for k in range(masks.shape[1]):
+            if masks[g, k]:
+                out[pos] = min(max(coef[k], -1e6), 1e6)
+                pos += 1
+        out[pos] = 1.0 if sig[g] else 0.0
+        pos += 1
+
+
+class IdentificationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Runs a :class:`identifier.RecursiveQR` inside a rotor environment.
 
     At every step it feeds all measurement samples of the step
@@ -206,7 +323,13 @@ class IdentificationWrapper(gym.Wrapper):
         include_energy: bool = False,
         keep_estimator: bool = False,
     ) -> None:
-        super().__init__(env)
+        # recorded so that gymnasium can re-create the wrapped env from its spec
+        gym.utils.RecordConstructorArgs.__init__(
+            self, effects=tuple(effects), equation=equation, forgetting=forgetting, prior=prior, alpha=alpha,
+            test=test, min_samples=min_samples, include_p_values=include_p_values,
+            include_energy=include_energy, keep_estimator=keep_estimator,
+        )
+        gym.Wrapper.__init__(self, env)
         base = env.observation_space
         if not isinstance(base, spaces.Box) or len(base.shape) != 1:
             raise ValueError(f"IdentificationWrapper needs a flat Box observation space, got {base}")
@@ -246,8 +369,8 @@ class IdentificationWrapper(gym.Wrapper):
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self.core.update(info["measurements"], info.get("control"))
-        return self._obs(obs), reward, terminated, truncated, info
+        feats = self.core.step_features(info["measurements"], info.get("control"))
+        return np.concatenate([np.asarray(obs, dtype=np.float32), feats]), reward, terminated, truncated, info
 
 
 class VectorIdentificationWrapper(gym.vector.VectorWrapper):

@@ -1,0 +1,130 @@
+"""Domain randomisation of the environment rotors, and rotor -> kernel arrays.
+
+:func:`sample_params` draws one rotor from a ``numpy.random.Generator`` with a fixed
+number of draws (one ``rng.random(N)`` call), so an episode's rotor is a pure function
+of the generator state: the single env draws from ``self.np_random`` and sub-env ``i`` of
+a vector env from its own generator seeded with ``seed + i`` — the same rotor.
+
+========================  ===================  ===========================================
+parameter                 distribution         notes
+========================  ===================  ===========================================
+``k`` (stiffness)         U(0.64, 1.44)        natural frequency sqrt(k) in [0.8, 1.2]
+``ip``                    U(0.1, 0.5)          critical speed sqrt(k/(1-ip)) <= 1.70
+``tau`` (unbalance)       U(0.01, 0.03)        always present
+``beta`` (unbalance)      U(-pi, pi)           phase of the unbalance
+``c`` (viscous)           U(0.02, 0.05)        always present
+``D`` (asymmetry)         U(0.01, 0.05)        present with probability 0.5
+``h`` (dry friction)      U(0.002, 0.008)      present with probability 0.5 (h/c <= 0.4)
+``k30, k21, k12, k03``    U(0, 0.06) each      present with probability 0.5 (together)
+========================  ===================  ===========================================
+
+Absent effects are left out of :attr:`RotorParams.effects` (so ``info["params"]`` says
+which effects the rotor has); the simulation gives them coefficient 0.  The ranges keep
+the critical speed below the default operating speeds (2.0 run-up, 2.5 balancing) and the
+dry-friction whirl (amplitude about ``0.85 h/c``) well inside the default clearance 0.6.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import RotorParams
+from .core import (
+    _SMOOTH,
+    COEF_OFFSET,
+    ENV_EFFECTS,
+    N_COEF,
+    N_PAR,
+    P_CRACK_D,
+    P_CRACK_SAMPLE,
+    P_H,
+    P_IP,
+)
+
+__all__ = ["PRESENCE", "RANGES", "ParamRange", "params_to_arrays", "sample_params"]
+
+
+@dataclass(frozen=True)
+class ParamRange:
+    """A uniformly drawn parameter: ``name ~ U(low, high)`` belonging to ``effect``."""
+
+    name: str
+    low: float
+    high: float
+    effect: str | None  # None: not an effect parameter (ip)
+
+
+RANGES: tuple[ParamRange, ...] = (
+    ParamRange("k", 0.64, 1.44, "stiffness"),
+    ParamRange("ip", 0.1, 0.5, None),
+    ParamRange("tau", 0.01, 0.03, "unbalance"),
+    ParamRange("beta", -math.pi, math.pi, "unbalance"),
+    ParamRange("c", 0.02, 0.05, "viscous_damping"),
+    ParamRange("D", 0.01, 0.05, "asymmetry"),
+    ParamRange("h", 0.002, 0.008, "structural_damping"),
+    ParamRange("k30", 0.0, 0.06, "nonlinear_stiffness"),
+    ParamRange("k21", 0.0, 0.06, "nonlinear_stiffness"),
+    ParamRange("k12", 0.0, 0.06, "nonlinear_stiffness"),
+    ParamRange("k03", 0.0, 0.06, "nonlinear_stiffness"),
+)
+#: Probability that an optional effect is present (the others always are).
+PRESENCE: dict[str, float] = {
+    "asymmetry": 0.5,
+    "structural_damping": 0.5,
+    "nonlinear_stiffness": 0.5,
+}
+_N_DRAWS = len(RANGES) + len(PRESENCE)
+
+
+def sample_params(rng: np.random.Generator) -> RotorParams:
+    """Draw one rotor (see the module table); exactly one ``rng.random`` call."""
+    u = rng.random(_N_DRAWS).tolist()
+    present = {e: u[len(RANGES) + i] < p for i, (e, p) in enumerate(PRESENCE.items())}
+    ip = 0.3
+    values: dict[str, float] = {}
+    for r, ui in zip(RANGES, u, strict=False):
+        v = r.low + (r.high - r.low) * ui
+        if r.effect is None:
+            ip = v
+        elif present.get(r.effect, True):
+            values[r.name] = v
+    effects = tuple(e for e in ENV_EFFECTS if present.get(e, True))
+    return RotorParams(ip=ip, values=values, effects=effects)
+
+
+#: The paper's Table 1 rotor (``randomize=False``).
+TABLE1 = RotorParams()
+
+
+def params_to_arrays(params: RotorParams, sensor_dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(coef, par)`` kernel arrays of a rotor (absent effects get coefficient 0).
+
+    The crack (if any) switches ``D`` from the sample ``round(crack.time / sensor_dt)`` on.
+    """
+    if not isinstance(params, RotorParams):
+        raise ValueError(f"options['params'] must be a RotorParams, got {type(params).__name__}")
+    extra = [e for e in params.effects if e not in ENV_EFFECTS]
+    if extra:
+        raise ValueError(
+            f"the environments simulate the effects {', '.join(ENV_EFFECTS)}; "
+            f"the rotor has unsupported effect(s) {', '.join(extra)}"
+        )
+    coef = np.zeros(N_COEF)
+    for e in _SMOOTH:
+        if e.name in params.effects:
+            j = COEF_OFFSET[e.name]
+            c = params.coefficients(e.name)
+            coef[j : j + len(c)] = c
+    par = np.empty(N_PAR)
+    par[P_H] = params.h if "structural_damping" in params.effects else 0.0
+    par[P_IP] = params.ip
+    if params.crack is None:
+        par[P_CRACK_SAMPLE] = np.inf
+        par[P_CRACK_D] = 0.0
+    else:
+        par[P_CRACK_SAMPLE] = float(round(params.crack.time / sensor_dt))
+        par[P_CRACK_D] = params.crack.D
+    return coef, par
