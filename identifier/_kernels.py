@@ -290,3 +290,4 @@ def snapshot(
         clean_factor(work, keep, work2, row)
         J_without[g] = work2[n, n] * work2[n, n]
     return J_full
+

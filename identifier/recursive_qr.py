@@ -130,6 +130,7 @@ class RecursiveQR:
         self.rtol = float(rtol)
         self.columns: tuple[str, ...] = columns or tuple(f"x{i + 1}" for i in range(self.n))
         self.groups: dict[str, tuple[str, ...]] = self._check_groups(groups)
+        self._masks = self._build_group_masks()
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -357,6 +358,10 @@ class RecursiveQR:
         )
 
     def _group_masks(self) -> np.ndarray:
+        """``(groups, n)`` boolean: which columns each group owns (in :attr:`groups` order)."""
+        return self._masks
+
+    def _build_group_masks(self) -> np.ndarray:
         masks = np.zeros((len(self.groups), self.n), dtype=np.bool_)
         for g, cols in enumerate(self.groups.values()):
             masks[g, [self.columns.index(c) for c in cols]] = True
