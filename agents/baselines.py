@@ -144,6 +144,13 @@ class ModelBasedBalancer(Policy):
     uses — evaluated at the observed spin angle, speed and acceleration; the agent
     applies its negative.  A small velocity feedback ``-g theta'`` damps what remains
     (the dry-friction whirl).
+
+    The environment holds each action for a step ``dt`` while the unbalance moment
+    turns by ``speed * dt`` (up to ~1.3 rad): a staircase whose synchronous (1x) part
+    is ``sinc(speed dt / 2)`` times the held value, lagging by ``speed dt / 2``.  The
+    agent therefore evaluates the moment at the mid-step angle and divides by the sinc,
+    so the 1x part of what it applies cancels the unbalance exactly; what remains is at
+    the step rate, far above the critical speed.
     """
 
     name = "model_based"
@@ -156,7 +163,8 @@ class ModelBasedBalancer(Policy):
         speed_scale: float,
         phidd_scale: float,
         clearance: float,
-        damping_gain: float = 0.05,
+        step_dt: float,
+        damping_gain: float = 0.3,
     ) -> None:
         from rotor_env.effects import get_effect
 
@@ -165,21 +173,24 @@ class ModelBasedBalancer(Policy):
         self.ip_idx = offset + layout["ip"].start
         self.columns = get_effect("unbalance").columns
         self.m_max, self.speed_scale, self.phidd_scale = m_max, speed_scale, phidd_scale
-        self.clearance, self.gain = clearance, damping_gain
+        self.clearance, self.gain, self.dt = clearance, damping_gain, step_dt
 
     @classmethod
     def for_env(cls, env: gym.Env, **kwargs) -> ModelBasedBalancer:
         u = env.unwrapped
         return cls(find_wrapper_attr(env, "layout"), find_wrapper_attr(env, "offset"), u.m_max,
-                   u._speed_max, u.spin_rate, u.clearance, **kwargs)
+                   u._speed_max, u.spin_rate, u.clearance, u.step_dt, **kwargs)
 
     def act(self, obs):
         speed = float(obs[0]) * self.speed_scale
         phidd = float(obs[1]) * self.phidd_scale
-        phi = math.atan2(float(obs[3]), float(obs[2]))
+        half = 0.5 * self.dt
+        phi = math.atan2(float(obs[3]), float(obs[2])) + speed * half + 0.5 * phidd * half * half
+        x = (speed + phidd * half) * half
+        gain = x / math.sin(x) if x > 1e-6 else 1.0  # 1 / sinc: the hold's 1x attenuation
         ip = float(obs[self.ip_idx])
-        cy, cx = self.columns(phi, speed, phidd, 0.0, 0.0, 0.0, 0.0, ip)
-        c = obs[self.coef].astype(float)
+        cy, cx = self.columns(phi, speed + phidd * half, phidd, 0.0, 0.0, 0.0, 0.0, ip)
+        c = obs[self.coef].astype(float) * gain
         m_y = -(c[0] * cy[0] + c[1] * cy[1]) - self.gain * float(obs[7]) * self.clearance
         m_x = -(c[0] * cx[0] + c[1] * cx[1]) - self.gain * float(obs[6]) * self.clearance
         return np.clip(np.array([m_x, m_y]) / self.m_max, -1.0, 1.0).astype(np.float32)

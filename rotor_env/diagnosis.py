@@ -519,6 +519,8 @@ def _order_profile(data: _Data, values: np.ndarray) -> np.ndarray:
 
 
 GRID = 160  # change-point candidates per scan (the Bonferroni factor of the scan)
+#: an onset or change must remove at least this share of the energy the effect explains
+ONSET_SHARE = 0.01
 
 
 def _scan(A: np.ndarray, t_rows: np.ndarray, t_grid: np.ndarray, zero_pre, zero_suf) -> np.ndarray:
@@ -583,7 +585,11 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
             tc, J_app = _appear_scan(data, base, name, kn)
             Fa, _, lpa, _ = partial_f(base.energy, J_app, q, dof)
             lpa = min(0.0, float(lpa) + math.log10(GRID))
-            if lpa < lp and comp.energy > 0 and (comp.energy - J_app) / comp.energy >= min_energy_drop:
+            gain = comp.energy - J_app
+            # the onset must matter twice: against what is left, and against what the
+            # effect explains (on noise-free data what is left is rounding, see _change_time)
+            if (lpa < lp and comp.energy > 0 and gain >= min_energy_drop * comp.energy
+                    and gain >= ONSET_SHARE * (base.energy - comp.energy)):
                 onset = tc
                 F, lp = float(Fa), lpa
                 comp = compare(data, (*base.model, name), kn, {**base.onsets, name: tc})
@@ -624,8 +630,17 @@ def _change_time(data: _Data, comp: Comparison, effect: str, known: dict, alpha:
     J = _scan(A, t_rows, t_grid, after, cols)
     k = int(np.argmin(J))
     q = len(cols)
-    _, _, lp, _ = partial_f(comp.energy, J[k], q, len(y) - comp.n_params - q)
-    if float(lp) + math.log10(GRID) < math.log10(alpha) and (comp.energy - J[k]) / comp.energy >= min_energy_drop:
+    dof = len(y) - comp.n_params - q
+    _, _, lp, _ = partial_f(comp.energy, J[k], q, dof)
+    drop = comp.energy - J[k]
+    # energy the effect explains in the model: from its test (F of removing it, tested last)
+    sig = comp.significance.get(effect, {})
+    explained = sig.get("F", 0.0) * q * comp.energy / max(len(y) - comp.n_params, 1)
+    # a change must matter against what is left AND against the effect itself: on
+    # noise-free data what is left is integration error, and splitting any coefficient
+    # "removes" a large share of it while changing the value by 1e-5
+    if (float(lp) + math.log10(GRID) < math.log10(alpha) and drop >= min_energy_drop * comp.energy
+            and drop >= ONSET_SHARE * explained):
         return float(t_grid[k])
     return None
 
