@@ -61,8 +61,10 @@ class RunUpOracle(Policy):
 
     name = "oracle"
 
-    def __init__(self, a_max: float, target_speed: float, t_max: float, rate: float = 0.01) -> None:
+    def __init__(self, a_max: float, target_speed: float, t_max: float, rate: float = 0.01,
+                 max_evaluations: int = 60) -> None:
         self.a_max, self.target, self.t_max = a_max, target_speed, t_max
+        self.max_evaluations = max_evaluations
         self.t_budget = target_speed / rate
         self.plan = (0.0, 0.0, rate, rate)
 
@@ -79,12 +81,9 @@ class RunUpOracle(Policy):
             s, after = _schedule(v1, v2, slow, self.a_max, self.target, self.t_budget)
             return schedule_peak(params, v1, v2, s, after, self.a_max, self.target, self.t_max)
 
-        best = None
-        for z0 in ([0.8 * wc, 1.3 * wc, 0.008], [0.7 * wc, 1.5 * wc, 0.01]):
-            res = minimize(cost, z0, method="Nelder-Mead",
-                           options={"maxfev": 60, "xatol": 1e-3, "fatol": 1e-4, "initial_simplex": None})
-            if best is None or res.fun < best.fun:
-                best = res
+        # start from the slow-fast-slow guess around the true critical speed
+        best = minimize(cost, [0.8 * wc, min(1.3 * wc, 0.95 * self.target), 0.008], method="Nelder-Mead",
+                        options={"maxfev": self.max_evaluations, "xatol": 1e-3, "fatol": 1e-4})
         v1, v2, slow = best.x
         s, after = _schedule(v1, v2, slow, self.a_max, self.target, self.t_budget)
         self.plan = (v1, v2, s, after)

@@ -56,7 +56,7 @@ import numpy as np
 
 from identifier import RecursiveQR, partial_f
 
-from .effects import EFFECTS, PHYSICAL_EFFECTS, Effect, get_effect, register_effect
+from .effects import EFFECTS, PHYSICAL_EFFECTS, Effect, Parameter, get_effect, register_effect
 from .measurements import Measurements
 from .params import RotorParams
 from .regression import RegressionSpec, regression_arrays
@@ -159,7 +159,7 @@ def effect_from_function(fn: Callable, name: str | None = None) -> Effect:
 
     return Effect(
         name=name,
-        parameters=tuple(__import__("rotor_env.effects", fromlist=["Parameter"]).Parameter(c, 0.0, f"user effect {name}") for c in coefs),
+        parameters=tuple(Parameter(c, 0.0, f"user effect {name}") for c in coefs),
         coefficients=coefs,
         columns=columns,
         to_coefficients=to_coef,
@@ -665,6 +665,7 @@ class Diagnosis:
     windows: list[dict]
     noise_floor: float
     data: _Data = field(repr=False)
+    steps: list[Comparison] = field(default_factory=list, repr=False)  # after each addition
 
     @property
     def candidates(self) -> list[Candidate]:
@@ -746,10 +747,9 @@ class Diagnosis:
 
     # -------------------------------------------------------------- figures
     def _ax(self, ax, figsize=(8, 4)):
-        import matplotlib
-
+        """``(figure, axes)``: the caller's ``ax`` or a new figure (matplotlib picks the
+        backend: Agg on a machine without a display)."""
         if ax is None:
-            matplotlib.use("Agg", force=False) if not _has_display() else None
             import matplotlib.pyplot as plt
 
             fig, ax = plt.subplots(figsize=figsize)
@@ -843,7 +843,7 @@ class Diagnosis:
     def plot_before_after(self, ax=None):
         """Equation-error RMS and free-run fit % along the forward selection."""
         fig, ax = self._ax(ax)
-        steps = [self.before] + [self._step_comparisons[i] for i in range(len(self._step_comparisons))]
+        steps = [self.before, *self.steps]
         labels = ["start"] + [f"+ {e}" for e in self.missing]
         x = np.arange(len(steps))
         ax.bar(x - 0.2, [s.fit_percent for s in steps], 0.4, color="C0", label="free-run fit %")
@@ -857,8 +857,6 @@ class Diagnosis:
         h2, l2 = ax2.get_legend_handles_labels()
         ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="lower right")  # on top of both bar sets
         return fig
-
-    _step_comparisons: list = field(default_factory=list, repr=False)
 
     def figures(self) -> dict[str, object]:
         return {
@@ -942,12 +940,6 @@ tr.missing{{background:#fde0dc}}img{{max-width:100%}}pre{{background:#f4f4f4;pad
 </body></html>"""
         path.write_text(doc, encoding="utf-8")
         return path
-
-
-def _has_display() -> bool:
-    import os
-
-    return bool(os.environ.get("DISPLAY"))
 
 
 def _jsonable(x):
@@ -1059,7 +1051,6 @@ def diagnose(
     diag = Diagnosis(
         source=measurements.source, ip=ip, alpha=alpha, equation=equation, t_start=data.t_start,
         start_model=model.effects, model=current.model, missing=missing, onset=onset, rounds=rounds,
-        before=before, after=current, windows=windows, noise_floor=floor, data=data,
+        before=before, after=current, windows=windows, noise_floor=floor, data=data, steps=steps,
     )
-    diag._step_comparisons = steps
     return diag

@@ -119,7 +119,10 @@ def _viscous(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
 
 
 def _asymmetry(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
-    s2, c2 = np.sin(2.0 * phi), np.cos(2.0 * phi)
+    # double-angle from sin/cos(phi): once inlined in the simulator, the compiler shares
+    # them with the unbalance's (two trigonometric calls per evaluation instead of four)
+    s, c = np.sin(phi), np.cos(phi)
+    s2, c2 = 2.0 * s * c, c * c - s * s
     return (-(th_y * c2 + th_x * s2),), (-(th_y * s2 - th_x * c2),)
 
 
