@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import gymnasium as gym
@@ -43,6 +44,8 @@ class IdentificationCore:
         min_samples: int = 500,
         include_p_values: bool = False,
         include_energy: bool = False,
+        stick_speed: float = 1e-4,
+        noise_floor: float = 1e-4,
     ) -> None:
         if test not in ("last", "nested"):
             raise ValueError(f"test must be 'last' or 'nested', got {test!r}")
@@ -55,6 +58,12 @@ class IdentificationCore:
         self.alpha = float(alpha)
         self.test = test
         self.min_samples = int(min_samples)
+        if not stick_speed >= 0:
+            raise ValueError(f"stick_speed must be >= 0, got {stick_speed!r}")
+        self.stick_speed = float(stick_speed)
+        if not noise_floor >= 0:
+            raise ValueError(f"noise_floor must be >= 0, got {noise_floor!r}")
+        self.noise_floor = float(noise_floor)
         self.include_p_values = include_p_values
         self.include_energy = include_energy
         groups = list(self.spec.groups.values())
@@ -70,7 +79,6 @@ class IdentificationCore:
         # work buffers of the hot path (never handed out)
         self._buf = {"coef": np.empty(n), "F": np.empty(G), "d1": np.empty(G), "d2": np.empty(G),
                      "ok": np.empty(G, dtype=np.bool_), "ident": np.empty(n, dtype=np.bool_)}
-        self._one_minus_alpha = 1.0 - self.alpha
         self._X = np.empty((0, self.spec.n_columns))
         self._y = np.empty(0)
         self._zero_mom = np.zeros((256, 2))
@@ -114,6 +122,12 @@ class IdentificationCore:
         # an env that diverged pads the step's remaining samples with NaN: skip those
         if not np.isfinite(data).all():
             data = data[np.isfinite(data).all(axis=1)]
+        if control is not None:
+            control = np.broadcast_to(np.asarray(control, dtype=float), (len(data), 2))
+        moving = _relative_speed(data) > self.stick_speed
+        if not moving.all():
+            data = data[moving]
+            control = None if control is None else control[moving]
         if data.shape[0] == 0:
             return
         X, y = build_rows(self.spec, np.ascontiguousarray(data), self.ip, control)
@@ -143,7 +157,7 @@ class IdentificationCore:
         self._kernel(
             data, self.ip, self.spec.known_coefficients, mom, self._X, self._y, est.R, est._col_sq, est._sums,
             est.forgetting, est.rtol, self._masks, self.test == "last", self._starts, self._ends,
-            float(self.min_samples), b["coef"], b["F"], b["d1"], b["d2"], b["ok"], b["ident"],
+            float(self.min_samples), self.stick_speed, self.noise_floor**2, b["coef"], b["F"], b["d1"], b["d2"], b["ok"], b["ident"],
         )
         return self._finish(b["F"], b["d1"], b["d2"], b["ok"], b["coef"])
 
@@ -152,7 +166,7 @@ class IdentificationCore:
         est = self.estimator
         b = self._buf
         _test_stats(est.R, est._col_sq, est.rtol, self._masks, est.effective_samples, self.test == "last",
-                    self._starts, self._ends, est.n_samples >= self.min_samples,
+                    self._starts, self._ends, est.n_samples >= self.min_samples, self.noise_floor**2,
                     b["coef"], b["F"], b["d1"], b["d2"], b["ok"], b["ident"])
         return b["F"], b["d1"], b["d2"], b["ok"], b["coef"]
 
@@ -168,12 +182,13 @@ class IdentificationCore:
 
     def _finish(self, F, d1, d2, ok, coef) -> np.ndarray:
         out = np.empty(self.size, dtype=np.float32)
-        # p < alpha  <=>  F > F_crit(alpha): one inverse-cdf call decides every flag exactly
-        sig = ok & (F > special.fdtri(d1, d2, self._one_minus_alpha))
+        # p < alpha on the survival function itself: exact for every alpha in (0, 1) (an
+        # inverse cdf at 1 - alpha rounds alpha < 1e-16 away: every flag would read 0)
+        sf = np.where(ok, special.fdtrc(d1, d2, F), 1.0)
+        sig = ok & (sf < self.alpha)
         _fill(out, self.ip, coef, self._masks, sig)
         pos = self._p_pos
         if self.include_p_values:
-            sf = np.where(ok, special.fdtrc(d1, d2, F), 1.0)
             out[pos : pos + len(F)] = np.log10(np.maximum(sf, 1e-300))
             pos += len(F)
         if self.include_energy:
@@ -183,7 +198,8 @@ class IdentificationCore:
 
 
 @njit(cache=True)
-def _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, enough, coef, F, d1, d2, ok, ident) -> None:
+def _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, enough, var_floor, coef, F, d1, d2, ok,
+                ident) -> None:
     """Partial F and degrees of freedom of each effect's test, in one pass.
 
     ``last``: the full model against it without the effect; otherwise the nested
@@ -222,9 +238,25 @@ def _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, enough, coef,
     for g in range(G):
         ok[g] = enough and d1[g] > 0 and d2[g] > 0
         if ok[g]:
-            F[g] = max(Jr[g] - Jf[g], 0.0) / d1[g] / (max(Jf[g], 1e-300) / d2[g])
+            # the residual variance is taken as at least the noise floor: on noise-free
+            # simulated data what is left is integration error, against which any
+            # numerical mismatch would look "significant"
+            F[g] = max(Jr[g] - Jf[g], 0.0) / d1[g] / max(Jf[g] / d2[g], var_floor, 1e-300)
         else:
             F[g], d1[g], d2[g] = 0.0, 1.0, 1.0
+
+
+def _relative_speed(data: np.ndarray) -> np.ndarray:
+    """Speed of the disk relative to the rotating shaft, per sample (PHYSICS.md: ``S``).
+
+    While the disk sticks to the shaft (dry friction, ``S ~ 0``) the samples carry no
+    information on the dynamics and bias the unbalance and damping estimates towards
+    zero (the friction holds the unbalance, yet the friction column reads 0); the
+    identifier skips them (``stick_speed``).
+    """
+    v_y = data[:, 7] + data[:, 2] * data[:, 4]
+    v_x = data[:, 6] - data[:, 2] * data[:, 5]
+    return np.hypot(v_y, v_x)
 
 
 _STEP_KERNELS: dict = {}
@@ -240,12 +272,24 @@ def _step_kernel(spec: RegressionSpec):
 
     @njit
     def kernel(data, ip, kc, mom, X, y, R, col_sq, sums, lam, rtol, masks, last, starts, ends,
-               min_samples, coef, F, d1, d2, ok, ident):
+               min_samples, stick_speed, var_floor, coef, F, d1, d2, ok, ident):
         build(data, ip, kc, mom, X, y)
-        update_rows(R, col_sq, sums, X, y, lam, rtol, np.empty((0, n + 1)), np.empty(0, dtype=np.int64),
+        # keep the rows of samples where the disk slips on the shaft (see _relative_speed)
+        per = X.shape[0] // data.shape[0]
+        k = 0
+        for r in range(data.shape[0]):
+            v_y = data[r, 7] + data[r, 2] * data[r, 4]
+            v_x = data[r, 6] - data[r, 2] * data[r, 5]
+            if math.sqrt(v_y * v_y + v_x * v_x) > stick_speed:
+                for q in range(per):
+                    if k != r * per + q:
+                        X[k, :] = X[r * per + q, :]
+                        y[k] = y[r * per + q]
+                    k += 1
+        update_rows(R, col_sq, sums, X[:k], y[:k], lam, rtol, np.empty((0, n + 1)), np.empty(0, dtype=np.int64),
                     np.empty((0, 0, n)))
         m_eff = sums[1] * sums[1] / sums[2] if sums[2] > 0 else 0.0
-        _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, sums[0] >= min_samples,
+        _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, sums[0] >= min_samples, var_floor,
                     coef, F, d1, d2, ok, ident)
 
     _STEP_KERNELS[key] = kernel
@@ -303,6 +347,13 @@ class IdentificationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     alpha, test, min_samples: of the significance flags.
     include_p_values, include_energy: append ``log10 p`` per effect / ``log10 J``.
     keep_estimator: ``reset()`` keeps the estimator's data (same rotor, new episode).
+    stick_speed: samples where the disk's speed relative to the shaft is at most this
+        are skipped: a disk stuck by dry friction tells nothing about the dynamics and
+        would bias the unbalance and damping towards zero (0 keeps every sample).
+    noise_floor: the F-tests take the residual standard deviation per regression row
+        as at least this (default 1e-4).  On noise-free simulated data what is left is
+        integration error, against which any numerical mismatch would be "significant";
+        on real, noisy data the floor is far below the noise and changes nothing.
 
     Known moments: if the env reports ``info["control"]`` (``M_x, M_y`` applied during
     the step), they are subtracted from ``y``.
@@ -322,12 +373,15 @@ class IdentificationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         include_p_values: bool = False,
         include_energy: bool = False,
         keep_estimator: bool = False,
+        stick_speed: float = 1e-4,
+        noise_floor: float = 1e-4,
     ) -> None:
         # recorded so that gymnasium can re-create the wrapped env from its spec
         gym.utils.RecordConstructorArgs.__init__(
             self, effects=tuple(effects), equation=equation, forgetting=forgetting, prior=prior, alpha=alpha,
             test=test, min_samples=min_samples, include_p_values=include_p_values,
-            include_energy=include_energy, keep_estimator=keep_estimator,
+            include_energy=include_energy, keep_estimator=keep_estimator, stick_speed=stick_speed,
+            noise_floor=noise_floor,
         )
         gym.Wrapper.__init__(self, env)
         base = env.observation_space
@@ -336,6 +390,7 @@ class IdentificationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.core = IdentificationCore(
             effects, equation=equation, forgetting=forgetting, prior=prior, alpha=alpha, test=test,
             min_samples=min_samples, include_p_values=include_p_values, include_energy=include_energy,
+            stick_speed=stick_speed, noise_floor=noise_floor,
         )
         self.keep_estimator = keep_estimator
         self.offset = base.shape[0]
@@ -405,9 +460,13 @@ class VectorIdentificationWrapper(gym.vector.VectorWrapper):
 
     def reset(self, *, seed=None, options=None):
         obs, info = self.env.reset(seed=seed, options=options)
-        for c, ip in zip(self.cores, self._ips(info), strict=True):
-            c.reset(ip)
-        self._done[:] = False
+        # options["reset_mask"] resets only those sub-envs: the others keep their identifier
+        mask = (options or {}).get("reset_mask")
+        mask = np.ones(len(self.cores), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        for c, ip, m in zip(self.cores, self._ips(info), mask, strict=True):
+            if m:
+                c.reset(ip)
+        self._done[mask] = False
         return self._obs(obs), info
 
     def step(self, actions):
@@ -415,10 +474,12 @@ class VectorIdentificationWrapper(gym.vector.VectorWrapper):
         meas = info["measurements"]
         ips = self._ips(info)
         control = info.get("control")
+        feats = np.empty((len(self.cores), self.cores[0].size), dtype=np.float32)
         for i, c in enumerate(self.cores):
             if self._done[i]:  # this step was the sub-env's reset
                 c.reset(ips[i])
+                feats[i] = c.features()
                 continue
-            c.update(meas[i], None if control is None else control[i])
+            feats[i] = c.step_features(meas[i], None if control is None else control[i])
         self._done = np.logical_or(terminated, truncated)
-        return self._obs(obs), reward, terminated, truncated, info
+        return np.concatenate([np.asarray(obs, dtype=np.float32), feats], axis=1), reward, terminated, truncated, info
