@@ -1,0 +1,112 @@
+"""Agents: every baseline runs, a smoke training saves and loads, committed policies evaluate."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import rotor_env  # noqa: F401 - registers the environments
+from agents.baselines import ConstantRamp, Fastest, ModelBasedBalancer, ModelBasedRunUp, NoControl
+from agents.evaluation import (
+    BALANCING,
+    RUN_UP,
+    default_agents,
+    evaluate,
+    policy_folder,
+    run_episode,
+)
+from agents.oracle import RunUpOracle, schedule_peak
+from agents.training import TrainedPolicy, make_env, train
+from rotor_env import RotorParams
+from rotor_env.cli import main
+
+
+def test_every_run_up_baseline_runs_an_episode():
+    env = make_env(RUN_UP, identifier=True)
+    u = env.unwrapped
+    plain = u.observation_space.shape[0]
+    agents = [
+        (ConstantRamp(u.a_max, 0.01), plain),
+        (Fastest(), plain),
+        (ModelBasedRunUp.for_env(env), None),
+        (RunUpOracle(u.a_max, u.target_speed, u.t_max, max_evaluations=15), plain),
+    ]
+    results = {type(a).__name__: run_episode(env, a, seed=7, observe_plain=p) for a, p in agents}
+    for r in results.values():
+        assert np.isfinite([r["peak_amplitude"], r["rms_amplitude"], r["return"], r["effort"]]).all()
+        assert r["time_to_speed"] <= u.t_max
+    # the constant ramp reaches speed 2.0 at t = 200 (within one step); the fastest at 40
+    assert results["ConstantRamp"]["time_to_speed"] == pytest.approx(200.0, abs=0.6)
+    assert results["Fastest"]["time_to_speed"] == pytest.approx(u.target_speed / u.a_max, abs=0.6)
+
+
+def test_constant_ramp_action_maps_to_the_paper_rate():
+    env = gym.make(RUN_UP, randomize=False)
+    env.reset(seed=0)
+    a = ConstantRamp(env.unwrapped.a_max, 0.01).predict(np.zeros(10, np.float32))[0]
+    _, _, _, _, info = env.step(a)
+    assert info["measurements"][-1, 3] == pytest.approx(0.01)
+    # batched observations give batched actions (the SB3 predict shape)
+    batch, _ = Fastest().predict(np.zeros((3, 10), np.float32))
+    assert batch.shape == (3, 1)
+
+
+def test_oracle_schedule_beats_the_constant_ramp_on_the_true_rotor():
+    """The issue's physics: slow-fast-slow cuts the peak strongly without dry friction."""
+    p = RotorParams().replace(h=0.0)
+    const = schedule_peak(p, 0.0, 0.0, 0.01, 0.01, 0.05, 2.0, 250.0)
+    oracle = RunUpOracle(0.05, 2.0, 250.0, max_evaluations=30).fit(p)
+    best = schedule_peak(p, *oracle.plan, 0.05, 2.0, 250.0)
+    assert const == pytest.approx(0.252, abs=0.003)
+    assert best < 0.75 * const
+
+
+def test_balancing_baselines_and_the_model_based_balancer_target():
+    """Model-based balancing lowers the RMS vibration through resonance by >= 80 %."""
+    env = make_env(BALANCING, identifier=True)
+    agents = {"no_control": (NoControl(), False), "model_based": (ModelBasedBalancer.for_env(env), True)}
+    res = evaluate(BALANCING, episodes=3, agents=agents)["agents"]
+    assert res["model_based"]["rms_amplitude"] <= 0.2 * res["no_control"]["rms_amplitude"]
+    assert res["model_based"]["rub_rate"] == 0.0
+
+
+def test_smoke_training_saves_and_loads(tmp_path):
+    out = train(RUN_UP, "ppo", 1024, identifier=True, seed=3, out=tmp_path / "p", eval_freq=1024,
+                eval_episodes=1, progress=False)
+    for f in ("model.zip", "vecnormalize.npz", "run.json"):
+        assert (out / f).stat().st_size > 0
+    meta = json.loads((out / "run.json").read_text())
+    assert meta["seed"] == 3 and meta["identifier"] is True and "rotor-id train" in meta["command"]
+    policy = TrainedPolicy.load(out)
+    env = make_env(RUN_UP, identifier=True)
+    obs, _ = env.reset(seed=1)
+    a1, _ = policy.predict(obs)
+    a2, _ = policy.predict(obs)
+    assert env.action_space.contains(np.asarray(a1, dtype=np.float32))
+    np.testing.assert_array_equal(a1, a2)  # deterministic
+    with pytest.raises(FileExistsError):
+        train(RUN_UP, "ppo", 64, out=out, progress=False)
+
+
+@pytest.mark.parametrize("env_id", [RUN_UP, BALANCING])
+def test_committed_policies_load_and_evaluate_on_three_rotors(env_id):
+    for ident in (True, False):
+        assert (policy_folder(env_id, ident) / "model.zip").stat().st_size <= 2 * 1024 * 1024
+    env = make_env(env_id, identifier=True)
+    names = set(default_agents(env_id, env))
+    assert {"sb3_identifier", "sb3_plain"} <= names
+    res = evaluate(env_id, episodes=3, agents={k: v for k, v in default_agents(env_id, env).items()
+                                               if k.startswith("sb3")})
+    for m in res["agents"].values():
+        assert all(np.isfinite(v) for v in m.values())
+
+
+def test_evaluate_cli_json(capsys):
+    assert main(["evaluate", "--env", BALANCING, "--episodes", "1", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for name in ("no_control", "model_based", "sb3_identifier", "sb3_plain"):
+        assert set(out["agents"][name]) >= {
+            "peak_amplitude", "rms_amplitude", "time_to_speed", "effort", "rub_rate", "return"}
