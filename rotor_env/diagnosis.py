@@ -507,7 +507,7 @@ class Candidate:
             "fit_percent_after": self.fit_percent_after, "energy_drop": self.energy_drop,
             "fit_gain": self.fit_gain, "significant": self.significant, "relevant": self.relevant,
             "correlation": self.correlation, "order_overlap": self.order_overlap, "onset": self.onset,
-            "story": self.story,
+            "declared_orders": list(EFFECTS[self.effect].orders), "story": self.story,
         }
 
 
