@@ -28,7 +28,8 @@ way).  Forward selection adds the best candidate while both hold:
    (Bonferroni), and
 2. *practically relevant*: the free-run fit improves by at least ``min_fit_gain``
    percentage points (default 2), or the equation-error energy falls by at least
-   ``min_energy_drop`` (default 5 %).
+   ``min_energy_drop`` (default 5 %) while the free-run fit does not get worse by
+   ``min_fit_gain`` or more.
 
 Rule 2 keeps data that only approximately follow the model (another simulator, a
 rig) from raising false alarms on tiny, statistically significant improvements,
@@ -82,6 +83,7 @@ LIBRARY_CANDIDATES: tuple[str, ...] = (
     "nonlinear_stiffness",
     "structural_damping",
     "stiffness",
+    "static_load",
 )
 
 
@@ -610,7 +612,9 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
             effect=name, F=F, log10_p=lp, rms_after=comp.rms, fit_percent_after=comp.fit_percent,
             energy_drop=float(drop), fit_gain=float(gain),
             significant=bool(q > 0 and lp < math.log10(alpha / n_cand)),
-            relevant=bool(gain >= min_fit_gain or drop >= min_energy_drop),
+            # an equation-error gain that makes the output error clearly worse explains the
+            # residual with the wrong physics (e.g. quadratic stiffness for a side load)
+            relevant=bool(gain >= min_fit_gain or (drop >= min_energy_drop and gain > -min_fit_gain)),
             correlation=float(corr), order_overlap=overlap, onset=onset,
             story=f"{eff.cause}. Signature: {eff.signature}.", comparison=comp,
         ))

@@ -141,6 +141,12 @@ def _dry_friction(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
     return (-v_y / S,), (-v_x / S,)
 
 
+def _static_load(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
+    one, zero = 1.0 + 0.0 * th_x, 0.0 * th_x
+    # coefficient order: load_y, load_x
+    return (one, zero), (zero, one)
+
+
 def _stiffness(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
     return (-th_y,), (-th_x,)
 
@@ -312,7 +318,27 @@ register_effect(
     )
 )
 
-#: The effects the simulator includes by default (the physical rotor of Table 1).
+_to, _from = _identity(("load_y", "load_x"))
+register_effect(
+    Effect(
+        name="static_load",
+        parameters=(
+            Parameter("load_y", 0.0, "constant moment in the y equation (gravity, misalignment)"),
+            Parameter("load_x", 0.0, "constant moment in the x equation"),
+        ),
+        coefficients=("load_y", "load_x"),
+        columns=_static_load,
+        to_coefficients=_to,
+        from_coefficients=_from,
+        moment="load_y,  load_x (constant)",
+        cause="a constant side load: gravity on a horizontal shaft, bearing misalignment, a magnetic pull",
+        signature="a static deflection: 0x in the fixed frame (with asymmetry, the crack's 2x)",
+        orders=(0,),
+    )
+)
+
+#: The effects the simulator includes by default (the physical rotor of Table 1; the
+#: static load is 0 there).
 PHYSICAL_EFFECTS: tuple[str, ...] = (
     "stiffness",
     "unbalance",
@@ -320,4 +346,5 @@ PHYSICAL_EFFECTS: tuple[str, ...] = (
     "asymmetry",
     "nonlinear_stiffness",
     "structural_damping",
+    "static_load",
 )
