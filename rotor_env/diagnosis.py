@@ -256,6 +256,8 @@ class Comparison:
     significance: dict[str, dict]
     residual: np.ndarray = field(repr=False)
     onsets: dict[str, float] = field(default_factory=dict)
+    splits: tuple[str, ...] = ()           # effects with onsets whose value changes (not appears)
+    physical_before: dict[str, float] = field(default_factory=dict)  # their values before
     simulated: Measurements | None = field(repr=False, default=None)
     diverged: bool = False
 
@@ -331,15 +333,30 @@ class _Data:
         self.data = np.ascontiguousarray(self.meas.data)
 
 
-def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, float]):
-    """``spec, X, y, t_rows`` of a model; effects with an onset are zero before it."""
+def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, float],
+            splits: Iterable[str] = ()):
+    """``spec, X, y, t_rows, columns, groups`` of a model.
+
+    An effect with an onset is zero before it (it *appears*); if it is also in
+    ``splits`` it has its own coefficients before the onset (its value *changes*, a
+    crack that grows), in extra columns named ``<coefficient>_before``.
+    """
     spec = RegressionSpec(effects=tuple(model), equation=data.equation, known=known or {})
     X, y = regression_arrays(spec, data.data, data.ip)
     t_rows = np.repeat(data.meas.t, spec.rows_per_sample)
+    columns, groups, extra = list(spec.columns), dict(spec.groups), []
     for e, tc in onsets.items():
         cols = [spec.columns.index(c) for c in spec.groups[e]]
-        X[np.ix_(t_rows < tc, cols)] = 0.0
-    return spec, X, y, t_rows
+        before = t_rows < tc
+        if e in splits:
+            extra.append(X[:, cols] * before[:, None])
+            names = tuple(f"{c}_before" for c in spec.groups[e])
+            columns += names
+            groups[f"{e}_before"] = names
+        X[np.ix_(before, cols)] = 0.0
+    if extra:
+        X = np.hstack([X, *extra])
+    return spec, X, y, t_rows, tuple(columns), groups
 
 
 def compare(
@@ -347,24 +364,36 @@ def compare(
     model: Sequence[str],
     known: dict | None = None,
     onsets: dict[str, float] | None = None,
+    splits: Iterable[str] = (),
     *,
     simulate: bool = True,
 ) -> Comparison:
     """Fit ``model`` (equation error) and, with ``simulate``, run it free (output error)."""
     onsets = dict(onsets or {})
-    spec, X, y, _ = _design(data, model, known or {}, onsets)
-    est = spec.estimator().fit(X, y)
+    splits = tuple(e for e in splits if e in onsets)
+    spec, X, y, _, columns, groups = _design(data, model, known or {}, onsets, splits)
+    est = RecursiveQR(columns=columns, groups=groups).fit(X, y)
     coef = est.coefficients()
     resid = y - X @ coef
     J = float(resid @ resid)
     tss = float(np.sum((y - y.mean()) ** 2))
-    physical = spec.physical(coef)
+    n = spec.n_columns
+    physical = spec.physical(coef[:n])
+    physical_before: dict[str, float] = {}
+    if splits:
+        theta_b = coef[:n].copy()
+        for e in splits:
+            for c in spec.groups[e]:
+                theta_b[spec.columns.index(c)] = coef[columns.index(f"{c}_before")]
+        pb = spec.physical(theta_b)
+        physical_before = {p.name: pb[p.name] for e in splits for p in EFFECTS[e].parameters}
     sig = est.effect_tests().to_dict()
     comp = Comparison(
-        model=tuple(model), columns=spec.columns, coefficients=coef, standard_errors=est.standard_errors(),
+        model=tuple(model), columns=columns, coefficients=coef, standard_errors=est.standard_errors(),
         physical=physical, energy=J, rms=math.sqrt(J / len(y)), r2=1.0 - J / tss if tss > 0 else 0.0,
         n_rows=len(y), n_params=int(est.identifiable().sum()), fit_x=float("nan"), fit_y=float("nan"),
-        fit_bands=[], significance=sig, residual=resid, onsets=onsets,
+        fit_bands=[], significance=sig, residual=resid, onsets=onsets, splits=splits,
+        physical_before=physical_before,
     )
     if simulate:
         _free_run(comp, data, spec.known)
@@ -382,8 +411,11 @@ def _free_run(comp: Comparison, data: _Data, known: dict) -> None:
         for a, b in zip(bounds[:-1], bounds[1:], strict=True):
             if b <= a:
                 continue
-            absent = {e for e, tc in comp.onsets.items() if tc > m.t[a]}
-            params = _model_params(comp.model, comp.physical, data.ip, known, absent)
+            pending = {e for e, tc in comp.onsets.items() if tc > m.t[a]}
+            # before its onset an effect is absent, or has its own values if it changes
+            physical = {**comp.physical, **{k: v for k, v in comp.physical_before.items()}} \
+                if pending & set(comp.splits) else comp.physical
+            params = _model_params(comp.model, physical, data.ip, known, pending - set(comp.splits))
             seg = free_run(params, m.t[a : b + 1], m.phi[a : b + 1], m.phi_dot[a : b + 1], state)
             pieces.append(seg.data if not pieces else seg.data[1:])
             state = tuple(seg.data[-1, 4:8])
@@ -562,7 +594,7 @@ def _grid(data: _Data) -> np.ndarray:
 
 def _appear_scan(data: _Data, base: Comparison, name: str, known: dict) -> tuple[float, float]:
     """Best onset ``t_c`` for ``name`` appearing mid-run, and the energy with it."""
-    spec, X, y, t_rows = _design(data, (*base.model, name), known, base.onsets)
+    spec, X, y, t_rows, _, _ = _design(data, (*base.model, name), known, base.onsets, base.splits)
     cols = [spec.columns.index(c) for c in spec.groups[name]]
     t_grid = _grid(data)
     J = _scan(np.column_stack([X, y]), t_rows, t_grid, cols, [])
@@ -577,7 +609,7 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
     res_profile = _order_profile(data, base.residual)
     for name in candidates:
         kn = {k: v for k, v in known.items() if k != name}
-        comp = compare(data, (*base.model, name), kn, base.onsets)
+        comp = compare(data, (*base.model, name), kn, base.onsets, base.splits)
         q = comp.n_params - base.n_params
         dof = comp.n_rows - comp.n_params
         F, _, lp, _ = partial_f(base.energy, comp.energy, q, dof)
@@ -594,7 +626,7 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
                     and gain >= ONSET_SHARE * (base.energy - comp.energy)):
                 onset = tc
                 F, lp = float(Fa), lpa
-                comp = compare(data, (*base.model, name), kn, {**base.onsets, name: tc})
+                comp = compare(data, (*base.model, name), kn, {**base.onsets, name: tc}, base.splits)
         # evidence: correlation of the residual with the candidate's columns, and order overlap
         spec = RegressionSpec(effects=(name,), equation=data.equation, known={})
         Xc, _ = regression_arrays(spec, data.data, data.ip)
@@ -622,10 +654,28 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
     return out
 
 
+def _appears_or_changes(data: _Data, comp: Comparison, effect: str, alpha: float,
+                        min_energy_drop: float) -> Comparison:
+    """An effect found appearing at ``t_c``: was it there before with another value?
+
+    The split model (own coefficients before ``t_c``) replaces the appearing one when
+    the extra coefficients are significant and remove at least ``min_energy_drop`` of
+    the energy left (a crack that *grows*, D 0.03 -> 0.08, rather than one that opens).
+    """
+    split = compare(data, comp.model, _known(comp.model), comp.onsets, (*comp.splits, effect))
+    q = split.n_params - comp.n_params
+    if q <= 0:
+        return comp
+    _, _, lp, _ = partial_f(comp.energy, split.energy, q, split.n_rows - split.n_params)
+    if float(lp) < math.log10(alpha) and comp.energy - split.energy >= min_energy_drop * comp.energy:
+        return split
+    return comp
+
+
 def _change_time(data: _Data, comp: Comparison, effect: str, known: dict, alpha: float,
                  min_energy_drop: float) -> float | None:
     """When an effect in the model changes mid-run: split its coefficient at ``t_c``."""
-    spec, X, y, t_rows = _design(data, comp.model, known, comp.onsets)
+    spec, X, y, t_rows, _, _ = _design(data, comp.model, known, comp.onsets, comp.splits)
     cols = [spec.columns.index(c) for c in spec.groups[effect]]
     n = X.shape[1]
     A = np.column_stack([X, X[:, cols], y])  # the effect's columns twice: before | after
@@ -678,7 +728,7 @@ class Diagnosis:
     def add(self, *names: str) -> Comparison:
         """The final model with more effects, compared (one call to add an effect)."""
         model = Model(self.model).add(*names).effects
-        return compare(self.data, model, _known(model), self.after.onsets)
+        return compare(self.data, model, _known(model), self.after.onsets, self.after.splits)
 
     # -------------------------------------------------------------- text/JSON
     def to_dict(self) -> dict:
@@ -704,6 +754,8 @@ class Diagnosis:
             "coefficients": self.after.coefficient_dict(),
             "standard_errors": dict(zip(self.after.columns, map(float, self.after.standard_errors), strict=True)),
             "physical": self.after.physical,
+            "changed": list(self.after.splits),
+            "physical_before": self.after.physical_before,
             "significance": self.after.significance,
             "failing_windows": self.windows,
             "noise_floor": self.noise_floor,
@@ -734,7 +786,14 @@ class Diagnosis:
             lines.append("missing effects, in the order added:")
             for e in self.missing:
                 on = self.onset.get(e)
-                lines.append(f"  + {e}" + (f"  (appears at t ≈ {on:.0f})" if on is not None else "  (present throughout)"))
+                if e in self.after.splits:
+                    change = ", ".join(
+                        f"{k} {self.after.physical_before[k]:.4g} -> {self.after.physical[k]:.4g}"
+                        for k in self.after.physical_before if k in EFFECTS[e].parameter_names)
+                    note = f"  (changes at t ≈ {on:.0f}: {change})"
+                else:
+                    note = f"  (appears at t ≈ {on:.0f})" if on is not None else "  (present throughout)"
+                lines.append(f"  + {e}{note}")
                 lines.append(f"      {EFFECTS[e].cause}")
         else:
             lines.append("no missing effect: the model explains the data (to the practical-relevance rule)")
@@ -1042,6 +1101,8 @@ def diagnose(
             break
         missing.append(chosen.effect)
         current = chosen.comparison
+        if chosen.onset is not None:
+            current = _appears_or_changes(data, current, chosen.effect, alpha, min_energy_drop)
         steps.append(current)
         remaining.remove(chosen.effect)
     if pbar is not None:

@@ -431,3 +431,18 @@ def test_a_side_load_is_not_mistaken_for_nonlinear_stiffness():
     assert res.missing == ["static_load"], res.summary()
     assert res.after.physical["load_y"] == pytest.approx(-0.005, rel=0.05)
     assert res.after.fit_percent > res.before.fit_percent + 2
+
+
+def test_a_growing_crack_is_a_change_not_an_appearance():
+    """``rotor-id simulate --crack 250:0.08`` on the Table-1 rotor: D jumps from 0.03 to 0.08.
+    The asymmetry is found with its onset, and with its value before and after."""
+    res = diagnose(simulate(RotorParams(crack=Crack(250.0, 0.08)), noise=NOISE, seed=1), ip=0.3)
+    assert res.missing[0] == "asymmetry", res.summary()
+    assert abs(res.onset["asymmetry"] - 250.0) <= 25.0
+    assert res.after.splits == ("asymmetry",)
+    assert res.after.physical_before["D"] == pytest.approx(0.03, rel=0.05)
+    assert res.after.physical["D"] == pytest.approx(0.08, rel=0.05)
+    assert "changes at t" in res.summary()
+    # the opened crack of the other test stays an appearance (no value before)
+    opened = diagnose(simulate(RotorParams(crack=Crack(250.0, 0.05)).replace(D=0.0), noise=NOISE, seed=1))
+    assert opened.after.splits == ()
