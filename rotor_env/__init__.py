@@ -44,28 +44,24 @@ __all__ = [
     "simulate",
 ]
 
-#: Gymnasium ids registered on import (entry points are strings: nothing heavy is imported).
+#: Gymnasium ids registered on import.
 ENV_IDS: tuple[str, ...] = ("rotor_env/RotorRunUp-v0", "rotor_env/RotorBalancing-v0")
 
 
 def _register_envs() -> None:
-    try:
-        import gymnasium
-    except ImportError:  # gymnasium is optional: the simulator and identifier work without
-        return
-    entry = {
-        "rotor_env/RotorRunUp-v0": "RotorRunUp",
-        "rotor_env/RotorBalancing-v0": "RotorBalancing",
-    }
-    module = {"RotorRunUp": "run_up", "RotorBalancing": "balancing"}
-    for env_id, name in entry.items():
-        if env_id in gymnasium.registry:
-            continue
-        gymnasium.register(
-            id=env_id,
-            entry_point=f"rotor_env.envs.{module[name]}:{name}Env",
-            vector_entry_point=f"rotor_env.envs.vector:{name}VectorEnv",
-        )
+    # gymnasium is a dependency (the wrapper above imports it); entry points are strings
+    import gymnasium
+
+    for env_id, module, name in (
+        ("rotor_env/RotorRunUp-v0", "run_up", "RotorRunUp"),
+        ("rotor_env/RotorBalancing-v0", "balancing", "RotorBalancing"),
+    ):
+        if env_id not in gymnasium.registry:
+            gymnasium.register(
+                id=env_id,
+                entry_point=f"rotor_env.envs.{module}:{name}Env",
+                vector_entry_point=f"rotor_env.envs.vector:{name}VectorEnv",
+            )
 
 
 _register_envs()

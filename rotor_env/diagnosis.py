@@ -279,15 +279,17 @@ def _fit_percent(meas: np.ndarray, model: np.ndarray) -> float:
 def _model_params(
     model: Sequence[str], physical: dict[str, float], ip: float, known: dict, absent: Iterable[str] = ()
 ) -> RotorParams:
-    """A simulatable rotor from identified physical parameters (absent effects = 0)."""
-    effects = tuple(dict.fromkeys((*PHYSICAL_EFFECTS, *model)))
-    effects = tuple(e for e in effects if e != "unbalance_in_phase") + (
-        ("unbalance_in_phase",) if "unbalance_in_phase" in model else ()
-    )
+    """A simulatable rotor from identified physical parameters (absent effects = 0).
+
+    Every physical effect is in the rotor (those not in the model with their known
+    values, else 0 — the stiffness scale 1); the paper's ``unbalance_in_phase``
+    replaces ``unbalance`` when the model uses it (they share ``tau``).
+    """
+    base = tuple(e for e in PHYSICAL_EFFECTS if not (e == "unbalance" and "unbalance_in_phase" in model))
+    effects = tuple(dict.fromkeys((*base, *model)))
     values: dict[str, float] = {}
     for e in effects:
-        eff = EFFECTS[e]
-        for p in eff.parameters:
+        for p in EFFECTS[e].parameters:
             if e in absent:
                 v = 0.0
             elif e in model:
@@ -295,15 +297,10 @@ def _model_params(
             elif e in known:
                 v = known[e][p.name]
             else:
-                v = 0.0 if p.name != "k" else 1.0
+                v = 1.0 if p.name == "k" else 0.0
             # identified values outside physical bounds (e.g. c < 0) are clipped to them
             values[p.name] = float(min(max(v, p.lower), p.upper))
-    if "unbalance_in_phase" in effects and "unbalance" in effects and "unbalance" not in model:
-        values["tau"] = physical.get("tau", 0.0)
-    if "unbalance_in_phase" in effects and "unbalance" in effects:
-        # both share tau: keep the physical unbalance only once
-        effects = tuple(e for e in effects if e != "unbalance")
-    return RotorParams(ip=ip, values={k: v for k, v in values.items() if k in RotorParams.known_names(effects)}, effects=effects)
+    return RotorParams(ip=ip, values=values, effects=effects)
 
 
 def _bands(speed: np.ndarray, n: int = 6) -> list[tuple[float, float]]:

@@ -180,16 +180,6 @@ def integrate(accel, state, t0, phi0, phid0, a, ip, coef, h, My, Mx, n_rec, ever
     return n_rec
 
 
-@njit(cache=False)
-def integrate_batch(accel, states, t0, phi0, phid0, a, ip, coef, h, My, Mx, n_rec, every, dt_sub, out, rows):
-    """:func:`integrate` for a batch of rotors (leading axis ``B`` on every array)."""
-    for b in range(states.shape[0]):
-        rows[b] = integrate(
-            accel, states[b], t0[b], phi0[b], phid0[b], a[b], ip[b], coef[b], h[b], My[b], Mx[b],
-            n_rec, every, dt_sub, out[b],
-        )
-
-
 # ------------------------------------------------------------------- public API
 @dataclass(frozen=True)
 class RunUp:
