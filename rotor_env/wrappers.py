@@ -12,7 +12,8 @@ from numba import njit
 from scipy import special
 
 from identifier import RecursiveQR
-from identifier._kernels import clean_factor, nested_energies, snapshot, update_rows
+from identifier._kernels import BLOCK_ROWS, clean_factor, nested_energies, snapshot, update_block
+from identifier._special import fdtrc
 
 from .regression import DEFAULT_EFFECTS, RegressionSpec, build_rows
 
@@ -74,15 +75,16 @@ class IdentificationCore:
         self._ends = (self._starts + np.array([len(g) for g in groups])).astype(np.int64)
         self.layout = self._layout()
         self.size = max(s.stop for s in self.layout.values())
-        self._p_pos = 1 + sum(len(g) + 1 for g in groups)
         G, n = self._masks.shape
-        # work buffers of the hot path (never handed out)
+        # work buffers of the Python-side queries (never handed out)
         self._buf = {"coef": np.empty(n), "F": np.empty(G), "d1": np.empty(G), "d2": np.empty(G),
                      "ok": np.empty(G, dtype=np.bool_), "ident": np.empty(n, dtype=np.bool_)}
-        self._X = np.empty((0, self.spec.n_columns))
-        self._y = np.empty(0)
-        self._zero_mom = np.zeros((256, 2))
-        self._kernel = _step_kernel(self.spec)
+        # the options the compiled step reads, packed in one array (see _write_features)
+        self._cfg = np.array([
+            self.estimator.forgetting, self.estimator.rtol, self.min_samples, self.stick_speed,
+            self.noise_floor**2, self.alpha, test == "last", include_p_values, include_energy,
+        ], dtype=float)
+        self._kernel = _step_kernel(self.spec, self._masks, self._starts, self._ends)
         self.ip = 0.3
 
     def _layout(self) -> dict[str, slice]:
@@ -139,27 +141,33 @@ class IdentificationCore:
 
         Same numbers as the two calls (tested); it only saves the Python overhead.
         """
+        return self.step_observation(_NO_OBS, measurements, control)
+
+    def step_observation(
+        self, obs: np.ndarray, measurements: np.ndarray, control: np.ndarray | None = None
+    ) -> np.ndarray:
+        """``[obs | features]`` after the step's samples (a new float32 array).
+
+        One compiled call builds the regression rows, skips the samples that are not
+        finite (a diverged env pads the step with NaN) or where the disk sticks, updates
+        the factor, runs the tests and writes the observation.
+        """
         data = np.asarray(measurements, dtype=float)
-        if data.shape[0] == 0 or not np.isfinite(data).all():
-            self.update(data, control)  # rare: empty or partly diverged step
-            return self.features()
-        data = np.ascontiguousarray(data)
-        m = data.shape[0]
-        rows = m * self.spec.rows_per_sample
-        if self._X.shape[0] != rows:
-            self._X = np.empty((rows, self.spec.n_columns))
-            self._y = np.empty(rows)
+        if data.ndim != 2 or data.shape[1] != _N_MEAS:
+            raise ValueError(f"measurements must have shape (samples, {_N_MEAS}), got {data.shape}")
         if control is None:
-            mom = np.zeros((m, 2)) if m > len(self._zero_mom) else self._zero_mom
+            mom = _NO_MOMENT
         else:
-            mom = np.ascontiguousarray(np.broadcast_to(np.asarray(control, float), (m, 2)))
-        est, b = self.estimator, self._buf
-        self._kernel(
-            data, self.ip, self.spec.known_coefficients, mom, self._X, self._y, est.R, est._col_sq, est._sums,
-            est.forgetting, est.rtol, self._masks, self.test == "last", self._starts, self._ends,
-            float(self.min_samples), self.stick_speed, self.noise_floor**2, b["coef"], b["F"], b["d1"], b["d2"], b["ok"], b["ident"],
-        )
-        return self._finish(b["F"], b["d1"], b["d2"], b["ok"], b["coef"])
+            # one moment held over the step (shape (2,)) or one per sample ((samples, 2))
+            mom = np.asarray(control, dtype=float).reshape(-1, 2)
+            if mom.shape[0] not in (1, data.shape[0]):
+                raise ValueError(f"control must have shape (2,) or ({data.shape[0]}, 2), got {np.shape(control)}")
+        obs = np.asarray(obs, dtype=np.float32)
+        out = np.empty(obs.shape[0] + self.size, dtype=np.float32)
+        est = self.estimator
+        self._kernel(np.ascontiguousarray(data), np.ascontiguousarray(mom), est.R, est._col_sq, est._sums,
+                     self._cfg, self.ip, obs, out)
+        return out
 
     def _test_inputs(self):
         """``(F, d1, d2, ok, coef)`` of every effect's test, from one compiled pass (buffers)."""
@@ -178,22 +186,10 @@ class IdentificationCore:
 
     def features(self) -> np.ndarray:
         """The appended observation part (a new float32 array)."""
-        return self._finish(*self._test_inputs())
-
-    def _finish(self, F, d1, d2, ok, coef) -> np.ndarray:
         out = np.empty(self.size, dtype=np.float32)
-        # p < alpha on the survival function itself: exact for every alpha in (0, 1) (an
-        # inverse cdf at 1 - alpha rounds alpha < 1e-16 away: every flag would read 0)
-        sf = np.where(ok, special.fdtrc(d1, d2, F), 1.0)
-        sig = ok & (sf < self.alpha)
-        _fill(out, self.ip, coef, self._masks, sig)
-        pos = self._p_pos
-        if self.include_p_values:
-            out[pos : pos + len(F)] = np.log10(np.maximum(sf, 1e-300))
-            pos += len(F)
-        if self.include_energy:
-            J = self.estimator.residual_energies()[-1]
-            out[pos] = np.log10(max(J, 1e-30))
+        est = self.estimator
+        _write_features(est.R, est._col_sq, est._sums, self._masks, self._starts, self._ends, self._cfg, self.ip,
+                        _NO_OBS, out)
         return out
 
 
@@ -206,6 +202,7 @@ def _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, enough, var_f
     sequence with the effect's columns added as a block.  ``ok`` is False where the
     test cannot be made (no identifiable column, no degrees of freedom, or not
     ``enough`` samples yet); there ``F = 0`` and ``d1 = d2 = 1`` (harmless for scipy).
+    Returns the full model's residual energy ``J_n``.
     """
     G, n = masks.shape
     J_without = np.empty(G)
@@ -244,6 +241,7 @@ def _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, enough, var_f
             F[g] = max(Jr[g] - Jf[g], 0.0) / d1[g] / max(Jf[g] / d2[g], var_floor, 1e-300)
         else:
             F[g], d1[g], d2[g] = 0.0, 1.0, 1.0
+    return J_full
 
 
 def _relative_speed(data: np.ndarray) -> np.ndarray:
@@ -259,55 +257,105 @@ def _relative_speed(data: np.ndarray) -> np.ndarray:
     return np.hypot(v_y, v_x)
 
 
+_N_MEAS = 10  # columns of a measurement sample (rotor_env.measurements.COLUMNS)
+_NO_OBS = np.empty(0, dtype=np.float32)
+_NO_MOMENT = np.zeros((1, 2))
+
+
+@njit
+def _write_features(R, col_sq, sums, masks, starts, ends, cfg, ip, obs, out) -> None:
+    """``out = [obs | ip | coefficients_e..., flag_e | ... | (log10 p_e) | (log10 J)]``.
+
+    ``cfg = [forgetting, rtol, min_samples, stick_speed, noise_floor^2, alpha, last,
+    include_p_values, include_energy]`` (see :class:`IdentificationCore`).  The flag is
+    ``p < alpha`` on scipy's own ``fdtrc`` (exact for every alpha in (0, 1), where an
+    inverse cdf at ``1 - alpha`` would round a tiny alpha away).  Not cached on disk:
+    it calls scipy through a raw address (:mod:`identifier._special`).
+    """
+    G, n = masks.shape
+    coef = np.empty(n)
+    F = np.empty(G)
+    d1 = np.empty(G)
+    d2 = np.empty(G)
+    ok = np.empty(G, dtype=np.bool_)
+    ident = np.empty(n, dtype=np.bool_)
+    m_eff = sums[1] * sums[1] / sums[2] if sums[2] > 0 else 0.0
+    J = _test_stats(R, col_sq, cfg[1], masks, m_eff, cfg[6] != 0.0, starts, ends, sums[0] >= cfg[2], cfg[4],
+                    coef, F, d1, d2, ok, ident)
+    for i in range(obs.shape[0]):
+        out[i] = obs[i]
+    pos = obs.shape[0]
+    out[pos] = ip
+    pos += 1
+    sf = np.empty(G)
+    for g in range(G):
+        sf[g] = fdtrc(d1[g], d2[g], F[g], 0) if ok[g] else 1.0
+        for k in range(n):
+            if masks[g, k]:
+                out[pos] = min(max(coef[k], -1e6), 1e6)
+                pos += 1
+        out[pos] = 1.0 if ok[g] and sf[g] < cfg[5] else 0.0
+        pos += 1
+    if cfg[7] != 0.0:
+        for g in range(G):
+            out[pos] = math.log10(max(sf[g], 1e-300))
+            pos += 1
+    if cfg[8] != 0.0:
+        out[pos] = math.log10(max(J, 1e-30))
+
+
 _STEP_KERNELS: dict = {}
 
 
-def _step_kernel(spec: RegressionSpec):
-    """Builder + time update + tests in one compiled function (one per regression spec)."""
+def _step_kernel(spec: RegressionSpec, masks: np.ndarray, starts: np.ndarray, ends: np.ndarray):
+    """Builder + time update + tests + observation in one compiled function (one per spec).
+
+    What the spec fixes (its known coefficients, the effects' columns) is compiled in
+    as constants: fewer arguments to unbox on each call (the hot path is ~10 us).
+    """
     key = (spec.effects, spec.equation, tuple(spec.known))
     if key in _STEP_KERNELS:
         return _STEP_KERNELS[key]
     build = spec.builder()
-    n = spec.n_columns
+    per = spec.rows_per_sample
+    kc = spec.known_coefficients.copy()
+    masks, starts, ends = masks.copy(), starts.copy(), ends.copy()
+    n = masks.shape[1]
 
     @njit
-    def kernel(data, ip, kc, mom, X, y, R, col_sq, sums, lam, rtol, masks, last, starts, ends,
-               min_samples, stick_speed, var_floor, coef, F, d1, d2, ok, ident):
+    def kernel(data, mom, R, col_sq, sums, cfg, ip, obs, out):
+        m = data.shape[0]
+        if mom.shape[0] != m:  # one moment held over the step
+            held = np.empty((m, 2))
+            for r in range(m):
+                held[r, 0], held[r, 1] = mom[0, 0], mom[0, 1]
+            mom = held
+        X = np.empty((m * per, n))
+        y = np.empty(m * per)
         build(data, ip, kc, mom, X, y)
-        # keep the rows of samples where the disk slips on the shaft (see _relative_speed)
-        per = X.shape[0] // data.shape[0]
+        # keep the rows of samples that are finite (a diverged env pads its last step
+        # with NaN) and where the disk slips on the shaft (see _relative_speed)
         k = 0
-        for r in range(data.shape[0]):
+        for r in range(m):
+            finite = True
+            for c in range(data.shape[1]):
+                finite = finite and math.isfinite(data[r, c])
             v_y = data[r, 7] + data[r, 2] * data[r, 4]
             v_x = data[r, 6] - data[r, 2] * data[r, 5]
-            if math.sqrt(v_y * v_y + v_x * v_x) > stick_speed:
+            if finite and math.sqrt(v_y * v_y + v_x * v_x) > cfg[3]:
                 for q in range(per):
                     if k != r * per + q:
                         X[k, :] = X[r * per + q, :]
                         y[k] = y[r * per + q]
                     k += 1
-        update_rows(R, col_sq, sums, X[:k], y[:k], lam, rtol, np.empty((0, n + 1)), np.empty(0, dtype=np.int64),
-                    np.empty((0, 0, n)))
-        m_eff = sums[1] * sums[1] / sums[2] if sums[2] > 0 else 0.0
-        _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, sums[0] >= min_samples, var_floor,
-                    coef, F, d1, d2, ok, ident)
+        # the same block-by-block update as RecursiveQR.update_many (no histories)
+        for b0 in range(0, k, BLOCK_ROWS):
+            b1 = min(b0 + BLOCK_ROWS, k)
+            update_block(R, col_sq, sums, X[b0:b1], y[b0:b1], cfg[0])
+        _write_features(R, col_sq, sums, masks, starts, ends, cfg, ip, obs, out)
 
     _STEP_KERNELS[key] = kernel
     return kernel
-
-
-@njit(cache=True)
-def _fill(out, ip, coef, masks, sig) -> None:
-    """``[ip | coefficients_e..., flag_e | ...]`` into ``out`` (clipped to +-1e6)."""
-    out[0] = ip
-    pos = 1
-    for g in range(masks.shape[0]):
-        for k in range(masks.shape[1]):
-            if masks[g, k]:
-                out[pos] = min(max(coef[k], -1e6), 1e6)
-                pos += 1
-        out[pos] = 1.0 if sig[g] else 0.0
-        pos += 1
 
 
 class IdentificationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -424,8 +472,8 @@ class IdentificationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        feats = self.core.step_features(info["measurements"], info.get("control"))
-        return np.concatenate([np.asarray(obs, dtype=np.float32), feats]), reward, terminated, truncated, info
+        obs = self.core.step_observation(obs, info["measurements"], info.get("control"))
+        return obs, reward, terminated, truncated, info
 
 
 class VectorIdentificationWrapper(gym.vector.VectorWrapper):
