@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from numba import njit
-from scipy import special
+from scipy import special, stats
 
 from identifier import RecursiveQR
 from identifier._kernels import BLOCK_ROWS, clean_factor, nested_energies, snapshot, update_block
@@ -80,10 +80,14 @@ class IdentificationCore:
         self._buf = {"coef": np.empty(n), "F": np.empty(G), "d1": np.empty(G), "d2": np.empty(G),
                      "ok": np.empty(G, dtype=np.bool_), "ident": np.empty(n, dtype=np.bool_)}
         # the options the compiled step reads, packed in one array (see _write_features)
+        brackets = self.alpha <= 0.5  # F_crit decreases with d2 only for alpha <= 1/2
         self._cfg = np.array([
             self.estimator.forgetting, self.estimator.rtol, self.min_samples, self.stick_speed,
-            self.noise_floor**2, self.alpha, test == "last", include_p_values, include_energy,
+            self.noise_floor**2, self.alpha, test == "last", include_p_values, include_energy, brackets,
+            *(stats.chi2.isf(self.alpha, d) / d for d in range(1, n + 1)),
         ], dtype=float)
+        self._crit = np.empty((G, 3))
+        self._crit[:, 0] = -1.0
         self._kernel = _step_kernel(self.spec, self._masks, self._starts, self._ends)
         self.ip = 0.3
 
@@ -117,6 +121,7 @@ class IdentificationCore:
 
     def reset(self, ip: float) -> None:
         self.estimator.reset()
+        self._crit[:, 0] = -1.0
         self.ip = float(ip)
 
     def update(self, measurements: np.ndarray, control: np.ndarray | None = None) -> None:
@@ -166,7 +171,7 @@ class IdentificationCore:
         out = np.empty(obs.shape[0] + self.size, dtype=np.float32)
         est = self.estimator
         self._kernel(np.ascontiguousarray(data), np.ascontiguousarray(mom), est.R, est._col_sq, est._sums,
-                     self._cfg, self.ip, obs, out)
+                     self._cfg, self._crit, self.ip, obs, out)
         return out
 
     def _test_inputs(self):
@@ -188,12 +193,12 @@ class IdentificationCore:
         """The appended observation part (a new float32 array)."""
         out = np.empty(self.size, dtype=np.float32)
         est = self.estimator
-        _write_features(est.R, est._col_sq, est._sums, self._masks, self._starts, self._ends, self._cfg, self.ip,
-                        _NO_OBS, out)
+        _write_features(est.R, est._col_sq, est._sums, self._masks, self._starts, self._ends, self._cfg,
+                        self._crit, self.ip, _NO_OBS, out)
         return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, enough, var_floor, coef, F, d1, d2, ok,
                 ident) -> None:
     """Partial F and degrees of freedom of each effect's test, in one pass.
@@ -205,10 +210,11 @@ def _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, enough, var_f
     Returns the full model's residual energy ``J_n``.
     """
     G, n = masks.shape
-    J_without = np.empty(G)
+    energies = np.empty(3 * G)
+    J_without = energies[:G]
     J_full = snapshot(R, col_sq, rtol, masks, ident, coef, J_without)
-    Jr = np.empty(G)
-    Jf = np.empty(G)
+    Jr = energies[G : 2 * G]
+    Jf = energies[2 * G :]
     if last:
         p = 0
         for k in range(n):
@@ -262,23 +268,28 @@ _NO_OBS = np.empty(0, dtype=np.float32)
 _NO_MOMENT = np.zeros((1, 2))
 
 
-@njit
-def _write_features(R, col_sq, sums, masks, starts, ends, cfg, ip, obs, out) -> None:
+@njit(error_model="numpy")
+def _write_features(R, col_sq, sums, masks, starts, ends, cfg, crit, ip, obs, out) -> None:
     """``out = [obs | ip | coefficients_e..., flag_e | ... | (log10 p_e) | (log10 J)]``.
 
     ``cfg = [forgetting, rtol, min_samples, stick_speed, noise_floor^2, alpha, last,
-    include_p_values, include_energy]`` (see :class:`IdentificationCore`).  The flag is
-    ``p < alpha`` on scipy's own ``fdtrc`` (exact for every alpha in (0, 1), where an
-    inverse cdf at ``1 - alpha`` would round a tiny alpha away).  Not cached on disk:
-    it calls scipy through a raw address (:mod:`identifier._special`).
+    include_p_values, include_energy, brackets on, F_crit(1, inf), ..., F_crit(n, inf)]``
+    (see :class:`IdentificationCore`); ``crit[g] = (d1, d2, F)`` of an F found significant
+    (``d1 = -1``: none yet).  The flag is ``p < alpha`` on scipy's own ``fdtrc`` (exact for
+    every alpha in (0, 1), where an inverse cdf at ``1 - alpha`` would round a tiny alpha
+    away).  Not cached on disk: it calls scipy through a raw address
+    (:mod:`identifier._special`).
     """
     G, n = masks.shape
-    coef = np.empty(n)
-    F = np.empty(G)
-    d1 = np.empty(G)
-    d2 = np.empty(G)
-    ok = np.empty(G, dtype=np.bool_)
-    ident = np.empty(n, dtype=np.bool_)
+    scratch = np.empty(n + 4 * G)
+    coef = scratch[:n]
+    F = scratch[n : n + G]
+    d1 = scratch[n + G : n + 2 * G]
+    d2 = scratch[n + 2 * G : n + 3 * G]
+    sf = scratch[n + 3 * G :]
+    flags = np.empty(G + n, dtype=np.bool_)
+    ok = flags[:G]
+    ident = flags[G:]
     m_eff = sums[1] * sums[1] / sums[2] if sums[2] > 0 else 0.0
     J = _test_stats(R, col_sq, cfg[1], masks, m_eff, cfg[6] != 0.0, starts, ends, sums[0] >= cfg[2], cfg[4],
                     coef, F, d1, d2, ok, ident)
@@ -287,14 +298,29 @@ def _write_features(R, col_sq, sums, masks, starts, ends, cfg, ip, obs, out) -> 
     pos = obs.shape[0]
     out[pos] = ip
     pos += 1
-    sf = np.empty(G)
+    # Without p-values in the observation the flag needs no survival function when the
+    # critical value F_crit(d1, d2) is bracketed: it decreases with d2 (alpha <= 0.5) down
+    # to chi2_{1-alpha}(d1) / d1, so F <= that limit is never significant, and F above an
+    # F already found significant at d2' <= d2 (remembered in ``crit``) always is.
+    brackets = cfg[7] == 0.0 and cfg[9] != 0.0
     for g in range(G):
-        sf[g] = fdtrc(d1[g], d2[g], F[g], 0) if ok[g] else 1.0
+        sf[g] = 1.0
+        if not ok[g]:
+            sig = False
+        elif brackets and F[g] <= cfg[9 + int(d1[g])]:
+            sig = False
+        elif brackets and crit[g, 0] == d1[g] and d2[g] >= crit[g, 1] and F[g] > crit[g, 2]:
+            sig = True
+        else:
+            sf[g] = fdtrc(d1[g], d2[g], F[g], 0)
+            sig = sf[g] < cfg[5]
+            if sig and brackets and not (crit[g, 0] == d1[g] and d2[g] >= crit[g, 1]):
+                crit[g, 0], crit[g, 1], crit[g, 2] = d1[g], d2[g], F[g]
         for k in range(n):
             if masks[g, k]:
                 out[pos] = min(max(coef[k], -1e6), 1e6)
                 pos += 1
-        out[pos] = 1.0 if ok[g] and sf[g] < cfg[5] else 0.0
+        out[pos] = 1.0 if sig else 0.0
         pos += 1
     if cfg[7] != 0.0:
         for g in range(G):
@@ -322,8 +348,8 @@ def _step_kernel(spec: RegressionSpec, masks: np.ndarray, starts: np.ndarray, en
     masks, starts, ends = masks.copy(), starts.copy(), ends.copy()
     n = masks.shape[1]
 
-    @njit
-    def kernel(data, mom, R, col_sq, sums, cfg, ip, obs, out):
+    @njit(error_model="numpy")
+    def kernel(data, mom, R, col_sq, sums, cfg, crit, ip, obs, out):
         m = data.shape[0]
         if mom.shape[0] != m:  # one moment held over the step
             held = np.empty((m, 2))
@@ -352,7 +378,7 @@ def _step_kernel(spec: RegressionSpec, masks: np.ndarray, starts: np.ndarray, en
         for b0 in range(0, k, BLOCK_ROWS):
             b1 = min(b0 + BLOCK_ROWS, k)
             update_block(R, col_sq, sums, X[b0:b1], y[b0:b1], cfg[0])
-        _write_features(R, col_sq, sums, masks, starts, ends, cfg, ip, obs, out)
+        _write_features(R, col_sq, sums, masks, starts, ends, cfg, crit, ip, obs, out)
 
     _STEP_KERNELS[key] = kernel
     return kernel

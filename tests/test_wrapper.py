@@ -562,3 +562,37 @@ def test_vector_wrapper_reset_mask_resets_only_those_identifiers():
     # sub-envs 1, 2 had ended and are autoreset by the next step: their identifiers too
     venv.step(acts)
     assert [c.estimator.n_samples for c in venv.cores[1:]] == [0, 0]
+
+
+@pytest.mark.parametrize("alpha", [0.05, 1e-6, 0.7])
+def test_flags_from_bracketed_critical_values_equal_the_survival_function(alpha):
+    # the observation without p-values decides most flags from bracketed critical values
+    # (F_crit falls with d2 towards chi2/d1); with p-values every flag comes from fdtrc
+    kw = {"alpha": alpha, "min_samples": 100}
+    bracketed, direct = IdentificationCore(**kw), IdentificationCore(include_p_values=True, **kw)
+    env = gym.make(RUN_UP)
+    _, info = env.reset(seed=4)
+    bracketed.reset(info["ip"])
+    direct.reset(info["ip"])
+    rng = np.random.default_rng(7)
+    G = len(bracketed.effects)
+    sl = [bracketed.layout[f"{e}.significant"] for e in bracketed.effects]
+    seen = np.zeros((G, 2), dtype=bool)
+    for k in range(300):
+        _, _, term, trunc, info = env.step(_act(env, 1.0))
+        meas = info["measurements"].copy()
+        # noise on the accelerations: effects cross the threshold back and forth
+        meas[:, 8:] += rng.normal(0.0, 0.02 if k % 50 < 25 else 2e-4, meas[:, 8:].shape)
+        a = bracketed.step_features(meas)
+        b = direct.step_features(meas)
+        fa = np.array([a[s][0] for s in sl])
+        fb = np.array([b[s][0] for s in sl])
+        np.testing.assert_array_equal(fa, fb, err_msg=f"step {k}")
+        seen[np.arange(G), fb.astype(int)] = True
+        if term or trunc:
+            break
+    assert seen.any(axis=0).all()  # both decisions occur
+    if alpha <= 0.5:
+        assert (bracketed._crit[:, 0] > 0).any()  # a significant F was remembered
+    else:
+        assert (bracketed._crit[:, 0] < 0).all()
