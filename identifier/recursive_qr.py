@@ -155,14 +155,22 @@ class RecursiveQR:
         return out
 
     def reset(self) -> RecursiveQR:
-        """Forget all data: back to the prior."""
+        """Forget all data: back to the prior.
+
+        The state arrays are reset in place (a batched owner may hold them as views).
+        """
         size = self.n + 1
-        self.R = np.sqrt(self.prior) * np.eye(size)
-        # Weighted squared norms of each regressor column (for the identifiability test);
-        # the prior counts, so that with delta > 0 every column is identifiable at once.
-        self._col_sq = np.full(self.n, self.prior)
-        # [samples seen, sum w, sum w^2]
-        self._sums = np.zeros(3)
+        if getattr(self, "R", None) is None:
+            self.R = np.empty((size, size))
+            # Weighted squared norms of each regressor column (for the identifiability
+            # test); the prior counts, so that with delta > 0 every column is
+            # identifiable at once.
+            self._col_sq = np.empty(self.n)
+            # [samples seen, sum w, sum w^2]
+            self._sums = np.empty(3)
+        self.R[...] = np.sqrt(self.prior) * np.eye(size)
+        self._col_sq[...] = self.prior
+        self._sums[...] = 0.0
         return self
 
     @property

@@ -86,10 +86,23 @@ class IdentificationCore:
             self.noise_floor**2, self.alpha, test == "last", include_p_values, include_energy, brackets,
             *(stats.chi2.isf(self.alpha, d) / d for d in range(1, n + 1)),
         ], dtype=float)
-        self._crit = np.empty((G, 3))
-        self._crit[:, 0] = -1.0
-        self._kernel = _step_kernel(self.spec, self._masks, self._starts, self._ends)
+        self._bind(np.empty(_state_size(n, G)))
+        self._kernel, self._batch_kernel = _step_kernel(self.spec, self._masks, self._starts, self._ends)
         self.ip = 0.3
+
+    def _bind(self, state: np.ndarray) -> None:
+        """Make ``state`` (a flat array, see :func:`_state_views`) hold the identifier's state.
+
+        The estimator's ``R``, column norms and sums and the remembered significant F
+        values become views of it, so that the compiled step takes one array (a vector
+        wrapper binds rows of one stacked array).  The current state is copied in.
+        """
+        est = self.estimator
+        R, col_sq, sums, crit = _state_views(state, est.n, len(self.effects))
+        R[...], col_sq[...], sums[...] = est.R, est._col_sq, est._sums
+        crit[...] = getattr(self, "_crit", -1.0)
+        est.R, est._col_sq, est._sums, self._crit = R, col_sq, sums, crit
+        self._state = state
 
     def _layout(self) -> dict[str, slice]:
         # the inertia ratio the regression uses (known geometry) comes first: a model-based
@@ -169,9 +182,7 @@ class IdentificationCore:
                 raise ValueError(f"control must have shape (2,) or ({data.shape[0]}, 2), got {np.shape(control)}")
         obs = np.asarray(obs, dtype=np.float32)
         out = np.empty(obs.shape[0] + self.size, dtype=np.float32)
-        est = self.estimator
-        self._kernel(np.ascontiguousarray(data), np.ascontiguousarray(mom), est.R, est._col_sq, est._sums,
-                     self._cfg, self._crit, self.ip, obs, out)
+        self._kernel(np.ascontiguousarray(data), np.ascontiguousarray(mom), self._state, self._cfg, self.ip, obs, out)
         return out
 
     def _test_inputs(self):
@@ -330,6 +341,21 @@ def _write_features(R, col_sq, sums, masks, starts, ends, cfg, crit, ip, obs, ou
         out[pos] = math.log10(max(J, 1e-30))
 
 
+def _state_size(n: int, G: int) -> int:
+    return (n + 1) * (n + 1) + n + 3 + 3 * G
+
+
+@njit(inline="always")
+def _state_views(state, n, G):
+    """``(R, col_sq, sums, crit)`` as views of one flat state array (``_state_size`` long)."""
+    s = n + 1
+    R = state[: s * s].reshape((s, s))
+    col_sq = state[s * s : s * s + n]
+    sums = state[s * s + n : s * s + n + 3]
+    crit = state[s * s + n + 3 : s * s + n + 3 + 3 * G].reshape((G, 3))
+    return R, col_sq, sums, crit
+
+
 _STEP_KERNELS: dict = {}
 
 
@@ -346,10 +372,11 @@ def _step_kernel(spec: RegressionSpec, masks: np.ndarray, starts: np.ndarray, en
     per = spec.rows_per_sample
     kc = spec.known_coefficients.copy()
     masks, starts, ends = masks.copy(), starts.copy(), ends.copy()
-    n = masks.shape[1]
+    G, n = masks.shape
 
     @njit(error_model="numpy")
-    def kernel(data, mom, R, col_sq, sums, cfg, crit, ip, obs, out):
+    def kernel(data, mom, state, cfg, ip, obs, out):
+        R, col_sq, sums, crit = _state_views(state, n, G)
         m = data.shape[0]
         if mom.shape[0] != m:  # one moment held over the step
             held = np.empty((m, 2))
@@ -380,8 +407,19 @@ def _step_kernel(spec: RegressionSpec, masks: np.ndarray, starts: np.ndarray, en
             update_block(R, col_sq, sums, X[b0:b1], y[b0:b1], cfg[0])
         _write_features(R, col_sq, sums, masks, starts, ends, cfg, crit, ip, obs, out)
 
-    _STEP_KERNELS[key] = kernel
-    return kernel
+    @njit(error_model="numpy")
+    def batch(data, mom, state, cfg, ip, stepped, obs, out):
+        # one call for a vector env: sub-env i steps its identifier if stepped[i], else
+        # (just reset) only writes its features
+        for i in range(data.shape[0]):
+            if stepped[i]:
+                kernel(data[i], mom[i], state[i], cfg, ip[i], obs[i], out[i])
+            else:
+                R, col_sq, sums, crit = _state_views(state[i], n, G)
+                _write_features(R, col_sq, sums, masks, starts, ends, cfg, crit, ip[i], obs[i], out[i])
+
+    _STEP_KERNELS[key] = kernel, batch
+    return kernel, batch
 
 
 class IdentificationWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -522,6 +560,14 @@ class VectorIdentificationWrapper(gym.vector.VectorWrapper):
         )
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, env.num_envs)
         self._done = np.zeros(env.num_envs, dtype=bool)
+        # the identifiers' states stacked, so that one compiled call steps them all; each
+        # core keeps views into them (its queries and its in-place resets still work)
+        c0 = self.cores[0]
+        self._state = np.stack([c._state for c in self.cores])
+        for i, c in enumerate(self.cores):
+            c._bind(self._state[i])
+        self._cfg, self._batch = c0._cfg, c0._batch_kernel
+        self._no_moment = np.zeros((env.num_envs, 1, 2))
 
     def _ips(self, info) -> np.ndarray:
         if "ip" in info:
@@ -545,15 +591,19 @@ class VectorIdentificationWrapper(gym.vector.VectorWrapper):
 
     def step(self, actions):
         obs, reward, terminated, truncated, info = self.env.step(actions)
-        meas = info["measurements"]
+        meas = np.asarray(info["measurements"], dtype=float)
+        n_envs = len(self.cores)
+        if meas.ndim != 3 or meas.shape[0] != n_envs or meas.shape[2] != _N_MEAS:
+            raise ValueError(f"measurements must have shape ({n_envs}, samples, {_N_MEAS}), got {meas.shape}")
         ips = self._ips(info)
+        for i in np.flatnonzero(self._done):  # this step was the sub-env's reset
+            self.cores[i].reset(ips[i])
         control = info.get("control")
-        feats = np.empty((len(self.cores), self.cores[0].size), dtype=np.float32)
-        for i, c in enumerate(self.cores):
-            if self._done[i]:  # this step was the sub-env's reset
-                c.reset(ips[i])
-                feats[i] = c.features()
-                continue
-            feats[i] = c.step_features(meas[i], None if control is None else control[i])
+        mom = self._no_moment if control is None else np.asarray(control, dtype=float).reshape(n_envs, -1, 2)
+        obs = np.asarray(obs, dtype=np.float32)
+        out = np.empty((n_envs, obs.shape[1] + self.cores[0].size), dtype=np.float32)
+        ip = np.array([c.ip for c in self.cores])
+        self._batch(np.ascontiguousarray(meas), np.ascontiguousarray(mom), self._state, self._cfg, ip, ~self._done,
+                    obs, out)
         self._done = np.logical_or(terminated, truncated)
-        return np.concatenate([np.asarray(obs, dtype=np.float32), feats], axis=1), reward, terminated, truncated, info
+        return out, reward, terminated, truncated, info

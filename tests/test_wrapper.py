@@ -536,6 +536,8 @@ def test_vector_wrapper_equals_single_wrappers_through_autoresets(env_id):
                 obs, _, term, trunc, info = env.step(actions[i])
             np.testing.assert_array_equal(vobs[i], obs)
             assert venv.cores[i].estimator.n_samples == env.estimator.n_samples
+            # the cores' estimators are views of the stacked state the batched step updates
+            np.testing.assert_array_equal(venv.cores[i].estimator.R, env.estimator.R)
             assert (vterm[i], vtrunc[i]) == (term, trunc)
             ended[i] = term or trunc
             identified[i] |= _feats(env, obs, "stiffness.coefficients")[0] != 0
