@@ -164,6 +164,33 @@ def test_run_up_holds_target_speed_and_reports_time_to_speed():
     assert info["effort"] == pytest.approx(0.05**2 * 40.0)
 
 
+def test_run_up_reward_terms_and_deadline():
+    # the paper's ramp (u = -0.6 in float32: a = 0.01) arrives at t = 200 exactly
+    kw = {"randomize": False, "t_max": 260.0, "w_vibration": 1.0, "w_effort": 0.1, "w_time": 3.0}
+    on_time, early = RotorRunUpEnv(deadline=200.0, **kw), RotorRunUpEnv(deadline=100.0, **kw)
+    on_time.reset(seed=0)
+    early.reset(seed=0)
+    u = np.array([2 * 0.01 / 0.05 - 1], dtype=np.float32)
+    late_steps = 0
+    while True:
+        _, r1, term, trunc, i1 = on_time.step(u)
+        _, r2, _, _, i2 = early.step(u)
+        m = i1["measurements"]
+        amp = np.hypot(m[:, 4], m[:, 5])
+        a = m[-1, 3]
+        expected = -(min(np.mean((amp / 0.6) ** 2), 1.0) + 0.1 * (a / 0.05) ** 2)
+        assert r1 == pytest.approx(expected, rel=1e-9, abs=1e-12)  # never late
+        late = m[-1, 0] > 100.0 and i2["time_to_speed"] is None
+        late_steps += late
+        assert r2 - r1 == pytest.approx(-3.0 if late else 0.0, abs=1e-12)
+        if term or trunc:
+            break
+    assert i1["time_to_speed"] == pytest.approx(200.0)
+    assert late_steps == 199  # the steps ending at 100.5 .. 199.5 (the one ending at 200 arrives)
+    with pytest.raises(ValueError, match="deadline"):
+        RotorRunUpEnv(deadline=-1.0)
+
+
 # ------------------------------------------------------------------------ actions
 @pytest.mark.parametrize("cls", [RotorRunUpEnv, RotorBalancingEnv])
 def test_nan_and_wrong_shape_actions_raise(cls):

@@ -15,6 +15,7 @@ from ..params import RotorParams
 from .core import (
     C_AMAX,
     C_CLEAR,
+    C_DEADLINE,
     C_DTSUB,
     C_EVERY,
     C_FAIL,
@@ -101,6 +102,7 @@ class RotorEnvBase(gym.Env[np.ndarray, np.ndarray]):
         a_max: float = 0.0,
         m_max: float = 0.0,
         spin_rate: float = 0.0,
+        deadline: float = 0.0,
         return_measurements: bool = True,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -148,6 +150,7 @@ class RotorEnvBase(gym.Env[np.ndarray, np.ndarray]):
         cfg[C_TMAX] = self.t_max
         cfg[C_WVIB] = self.w_vibration
         cfg[C_WTIME] = self.w_time
+        cfg[C_DEADLINE] = deadline
         cfg[C_WEFF] = self.w_effort
         cfg[C_FAIL] = self.fail_penalty
         cfg[C_MMAX] = m_max

@@ -63,18 +63,24 @@ class RotorRunUpEnv(RotorEnvBase):
 
     ## Rewards
 
-    Per step, with ``A_j`` the amplitude at the step's sensor samples, ``a`` the applied
-    acceleration and ``phi_dot`` the speed at the end of the step::
+    The task: reach the target speed by ``deadline`` (default 200, when the paper's
+    constant 0.01 run-up gets there) with as little vibration and drive effort as
+    possible.  Per step, with ``A_j`` the amplitude at the step's sensor samples and
+    ``a`` the applied acceleration::
 
         r = -( w_vibration * min(mean_j (A_j / clearance)^2, 1)
-             + w_time      * (1 - phi_dot / target_speed)
-             + w_effort    * (a / a_max)^2 )
+             + w_effort    * (a / a_max)^2
+             + w_time      * [step ends after deadline, target speed not reached] )
             - fail_penalty * [episode ends by rub or instability]
 
-    Each bracketed term lies in ``[0, 1]``.  The time term sums to the area between the
-    speed curve and the target (so it rewards reaching the speed early and is 0 from
-    then on).  ``fail_penalty`` defaults to ``max_steps * (w_vibration + w_time +
-    w_effort)``, more than any episode can lose otherwise, so ending early never pays.
+    Each bracketed term lies in ``[0, 1]``.  Effort is cheapest at a constant, slow
+    acceleration, vibration lowest when the critical speed is crossed fast: the best
+    schedule is slow–fast–slow around *this* rotor's critical speed, which is randomised
+    (below) — what an identified model tells and a fixed schedule cannot know.  A late
+    step costs ``w_time``; ``deadline=0`` makes every step before the target speed cost
+    it (a minimum-time run-up).  ``fail_penalty`` defaults to ``max_steps *
+    (w_vibration + w_time + w_effort)``, more than any episode can lose otherwise, so
+    ending early never pays.
 
     ## Starting State
 
@@ -136,13 +142,15 @@ class RotorRunUpEnv(RotorEnvBase):
     * ``sensor_dt=0.01``: sensor sample interval (50 samples per step).
     * ``max_substep=0.01``: largest RK4 sub-step; a step has ``>= 10`` sub-steps
       (``ValueError`` otherwise).  Defaults: 50 sub-steps per step.
+    * ``deadline=200.0``: time by which the target speed should be reached (>= 0).
     * ``w_vibration=1.0, w_time=1.0, w_effort=0.1, fail_penalty=None``: reward weights.
     * ``return_measurements=True``: ``False`` leaves ``"measurements"`` out of ``info``
       (a little faster, for pure RL training).
 
     ## Version History
 
-    * v0: initial version.
+    * v0: initial version; the time term became a deadline (late steps cost ``w_time``)
+      before the first release, so that the run-up has a schedule worth identifying.
     """
 
     _mode = MODE_RUN_UP
@@ -164,11 +172,13 @@ class RotorRunUpEnv(RotorEnvBase):
         w_vibration: float = 1.0,
         w_time: float = 1.0,
         w_effort: float = 0.1,
+        deadline: float = 200.0,
         fail_penalty: float | None = None,
         return_measurements: bool = True,
     ) -> None:
         self.target_speed = _positive("target_speed", target_speed)
         self.a_max = _positive("a_max", a_max)
+        self.deadline = _positive("deadline", deadline, allow_zero=True)
         self._setup(
             render_mode=render_mode,
             randomize=randomize,
@@ -185,5 +195,6 @@ class RotorRunUpEnv(RotorEnvBase):
             phidd_scale=self.a_max,
             target_speed=self.target_speed,
             a_max=self.a_max,
+            deadline=self.deadline,
             return_measurements=return_measurements,
         )
