@@ -164,31 +164,47 @@ def test_run_up_holds_target_speed_and_reports_time_to_speed():
     assert info["effort"] == pytest.approx(0.05**2 * 40.0)
 
 
-def test_run_up_reward_terms_and_deadline():
-    # the paper's ramp (u = -0.6 in float32: a = 0.01) arrives at t = 200 exactly
-    kw = {"randomize": False, "t_max": 260.0, "w_vibration": 1.0, "w_effort": 0.1, "w_time": 3.0}
-    on_time, early = RotorRunUpEnv(deadline=200.0, **kw), RotorRunUpEnv(deadline=100.0, **kw)
-    on_time.reset(seed=0)
-    early.reset(seed=0)
-    u = np.array([2 * 0.01 / 0.05 - 1], dtype=np.float32)
-    late_steps = 0
+@pytest.mark.parametrize("sprint_steps", [0, 60])
+def test_run_up_deadline_floor_and_reward_terms(sprint_steps):
+    # with a deadline every schedule arrives in time: commands below the rate still
+    # needed are raised to it (u = -1 is the constant ramp), whatever came before
+    kw = {"randomize": False, "t_max": 240.0, "w_vibration": 1.0, "w_effort": 0.1, "w_time": 3.0}
+    env = RotorRunUpEnv(deadline=200.0, **kw)
+    env.reset(seed=0)
+    k = 0
     while True:
-        _, r1, term, trunc, i1 = on_time.step(u)
-        _, r2, _, _, i2 = early.step(u)
-        m = i1["measurements"]
-        amp = np.hypot(m[:, 4], m[:, 5])
+        u = np.array([1.0 if k < sprint_steps else -1.0], dtype=np.float32)
+        _, r, term, trunc, info = env.step(u)
+        m = info["measurements"]
+        t0, speed0 = m[0, 0] - 0.01, m[0, 2] - 0.01 * m[0, 3]
         a = m[-1, 3]
-        expected = -(min(np.mean((amp / 0.6) ** 2), 1.0) + 0.1 * (a / 0.05) ** 2)
-        assert r1 == pytest.approx(expected, rel=1e-9, abs=1e-12)  # never late
-        late = m[-1, 0] > 100.0 and i2["time_to_speed"] is None
-        late_steps += late
-        assert r2 - r1 == pytest.approx(-3.0 if late else 0.0, abs=1e-12)
+        if k < sprint_steps:
+            assert a == pytest.approx(0.05)
+        elif t0 < 200.0 - 1e-9:
+            assert a == pytest.approx((2.0 - speed0) / (200.0 - t0), rel=1e-9)  # the floor
+        amp = np.hypot(m[:, 4], m[:, 5])
+        assert r == pytest.approx(-(min(np.mean((amp / 0.6) ** 2), 1.0) + 0.1 * (a / 0.05) ** 2), rel=1e-9, abs=1e-12)
+        k += 1
         if term or trunc:
             break
-    assert i1["time_to_speed"] == pytest.approx(200.0)
-    assert late_steps == 199  # the steps ending at 100.5 .. 199.5 (the one ending at 200 arrives)
-    with pytest.raises(ValueError, match="deadline"):
-        RotorRunUpEnv(deadline=-1.0)
+    assert info["time_to_speed"] == pytest.approx(200.0)
+    assert info["measurements"][-1, 2] == 2.0
+
+
+def test_run_up_without_deadline_rewards_arriving_early():
+    env = RotorRunUpEnv(randomize=False, deadline=None, w_time=3.0)
+    env.reset(seed=0)
+    _, r, _, _, info = env.step(np.array([-1.0], dtype=np.float32))  # no floor: a = 0
+    assert info["measurements"][-1, 2] == 0.0
+    assert r == pytest.approx(-3.0)  # the whole speed is missing; at rest nothing vibrates
+    _, r, _, _, info = env.step(np.array([1.0], dtype=np.float32))
+    speed = info["measurements"][-1, 2]
+    assert speed == pytest.approx(0.025)
+    amp = np.hypot(info["measurements"][:, 4], info["measurements"][:, 5])
+    assert r == pytest.approx(-(np.mean((amp / 0.6) ** 2) + 3.0 * (1 - speed / 2.0) + 0.1), rel=1e-9)
+    for bad in (-1.0, 39.0):
+        with pytest.raises(ValueError, match="deadline"):
+            RotorRunUpEnv(deadline=bad)
 
 
 # ------------------------------------------------------------------------ actions

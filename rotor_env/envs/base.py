@@ -102,7 +102,7 @@ class RotorEnvBase(gym.Env[np.ndarray, np.ndarray]):
         a_max: float = 0.0,
         m_max: float = 0.0,
         spin_rate: float = 0.0,
-        deadline: float = 0.0,
+        deadline: float = -1.0,
         return_measurements: bool = True,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:

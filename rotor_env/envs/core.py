@@ -118,6 +118,13 @@ def env_step(accel, state, dyn, coef, par, cfg, u0, u1, out, obs):
         target = cfg[C_TARGET]
         a = a_max * 0.5 * (u0 + 1.0)
         room = (target - phid0) / T
+        deadline = cfg[C_DEADLINE]
+        if deadline >= 0.0:
+            # the drive keeps the deadline: a command below the rate still needed to reach
+            # the target by then is raised to it (that rate never grows when followed)
+            left = deadline - t0
+            floor = room if left < T * (1.0 - 1e-9) else (target - phid0) / left
+            a = max(a, min(floor, a_max))
         # hold the target speed: never exceed it (a relative 1e-6 absorbs the rounding of
         # the speed summed over the steps and of float32 actions — u = -0.6 is 0.01 less
         # 6e-10 — so that a schedule meant to arrive at a step's end does)
@@ -199,9 +206,9 @@ def env_step(accel, state, dyn, coef, par, cfg, u0, u1, out, obs):
     dyn[D_REASON] = reason
 
     if run_up:
-        # a step that ends after the deadline without the target speed reached is late
-        late = 1.0 if t1 > cfg[C_DEADLINE] + 1e-9 and not (dyn[D_TTS] == dyn[D_TTS]) else 0.0
-        reward = -(cfg[C_WVIB] * vib + cfg[C_WTIME] * late + cfg[C_WEFF] * effort_term)
+        # without a deadline, the time term: the speed still missing (arrive early)
+        missing = (1.0 - phid1 / cfg[C_TARGET]) if cfg[C_DEADLINE] < 0.0 else 0.0
+        reward = -(cfg[C_WVIB] * vib + cfg[C_WTIME] * missing + cfg[C_WEFF] * effort_term)
     else:
         reward = -(cfg[C_WVIB] * vib + cfg[C_WEFF] * effort_term)
     if reason == R_RUB or reason == R_UNSTABLE:

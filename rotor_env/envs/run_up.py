@@ -38,9 +38,13 @@ class RotorRunUpEnv(RotorEnvBase):
     |-----|-------------------|--------------------------------------------------|
     | 0   | drive command `u` | spin acceleration `phi_ddot = a_max * (u + 1)/2` in `[0, a_max]` |
 
-    The acceleration is constant during a step and reduced to
-    ``(target_speed - phi_dot) / step_dt`` when the full value would overshoot the target,
-    so the speed never exceeds ``target_speed`` (and stays there: then ``phi_ddot = 0``).
+    The acceleration is constant during a step.  With a ``deadline`` (default) a command
+    below the rate still needed to reach the target by the deadline,
+    ``(target_speed - phi_dot) / (deadline - t)``, is raised to it: every schedule
+    arrives in time, ``u = -1`` is the constant ramp ``target_speed / deadline``, and the
+    agent decides where to spend acceleration beyond it.  The acceleration is reduced to
+    ``(target_speed - phi_dot) / step_dt`` when it would overshoot the target, so the
+    speed never exceeds ``target_speed`` (and stays there: then ``phi_ddot = 0``).
 
     ## Observation Space
 
@@ -63,24 +67,25 @@ class RotorRunUpEnv(RotorEnvBase):
 
     ## Rewards
 
-    The task: reach the target speed by ``deadline`` (default 200, when the paper's
-    constant 0.01 run-up gets there) with as little vibration and drive effort as
-    possible.  Per step, with ``A_j`` the amplitude at the step's sensor samples and
-    ``a`` the applied acceleration::
+    The task (default): the drive must have the rotor at the target speed by
+    ``deadline`` (200, when the paper's constant 0.01 run-up gets there — the drive
+    enforces it, above); spend as little vibration and drive effort as possible on the
+    way.  Per step, with ``A_j`` the amplitude at the step's sensor samples and ``a``
+    the applied acceleration::
 
         r = -( w_vibration * min(mean_j (A_j / clearance)^2, 1)
              + w_effort    * (a / a_max)^2
-             + w_time      * [step ends after deadline, target speed not reached] )
+             + w_time      * (1 - phi_dot / target_speed) * [deadline is None] )
             - fail_penalty * [episode ends by rub or instability]
 
-    Each bracketed term lies in ``[0, 1]``.  Effort is cheapest at a constant, slow
-    acceleration, vibration lowest when the critical speed is crossed fast: the best
+    Each bracketed term lies in ``[0, 1]``.  Effort is cheapest at the constant rate
+    (the floor), vibration lowest when the critical speed is crossed fast: the best
     schedule is slow–fast–slow around *this* rotor's critical speed, which is randomised
-    (below) — what an identified model tells and a fixed schedule cannot know.  A late
-    step costs ``w_time``; ``deadline=0`` makes every step before the target speed cost
-    it (a minimum-time run-up).  ``fail_penalty`` defaults to ``max_steps *
-    (w_vibration + w_time + w_effort)``, more than any episode can lose otherwise, so
-    ending early never pays.
+    (below) — what an identified model tells and a fixed schedule cannot know.  With
+    ``deadline=None`` the drive has no floor and the time term rewards arriving early
+    (a minimum-time run-up).  ``fail_penalty`` defaults to ``max_steps * (w_vibration +
+    w_time + w_effort)``, more than any episode can lose otherwise, so ending early
+    never pays.
 
     ## Starting State
 
@@ -142,15 +147,17 @@ class RotorRunUpEnv(RotorEnvBase):
     * ``sensor_dt=0.01``: sensor sample interval (50 samples per step).
     * ``max_substep=0.01``: largest RK4 sub-step; a step has ``>= 10`` sub-steps
       (``ValueError`` otherwise).  Defaults: 50 sub-steps per step.
-    * ``deadline=200.0``: time by which the target speed should be reached (>= 0).
+    * ``deadline=200.0``: time by which the drive reaches the target speed (at least
+      ``target_speed / a_max``); ``None``: no deadline, minimum-time reward.
     * ``w_vibration=1.0, w_time=1.0, w_effort=0.1, fail_penalty=None``: reward weights.
     * ``return_measurements=True``: ``False`` leaves ``"measurements"`` out of ``info``
       (a little faster, for pure RL training).
 
     ## Version History
 
-    * v0: initial version; the time term became a deadline (late steps cost ``w_time``)
-      before the first release, so that the run-up has a schedule worth identifying.
+    * v0: initial version; before the first release the drive got its deadline (and the
+      time term went to ``deadline=None``), so that the run-up has a schedule worth
+      identifying.
     """
 
     _mode = MODE_RUN_UP
@@ -172,13 +179,18 @@ class RotorRunUpEnv(RotorEnvBase):
         w_vibration: float = 1.0,
         w_time: float = 1.0,
         w_effort: float = 0.1,
-        deadline: float = 200.0,
+        deadline: float | None = 200.0,
         fail_penalty: float | None = None,
         return_measurements: bool = True,
     ) -> None:
         self.target_speed = _positive("target_speed", target_speed)
         self.a_max = _positive("a_max", a_max)
-        self.deadline = _positive("deadline", deadline, allow_zero=True)
+        if deadline is not None and not (deadline >= self.target_speed / self.a_max):
+            raise ValueError(
+                f"deadline must be None or >= target_speed / a_max = {self.target_speed / self.a_max:g} "
+                f"(the fastest run-up), got {deadline!r}"
+            )
+        self.deadline = None if deadline is None else float(deadline)
         self._setup(
             render_mode=render_mode,
             randomize=randomize,
@@ -195,6 +207,6 @@ class RotorRunUpEnv(RotorEnvBase):
             phidd_scale=self.a_max,
             target_speed=self.target_speed,
             a_max=self.a_max,
-            deadline=self.deadline,
+            deadline=-1.0 if self.deadline is None else self.deadline,
             return_measurements=return_measurements,
         )
