@@ -15,7 +15,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     command = "rotor-id " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["train"] else None
     out = train(args.env, args.algo, args.steps, identifier=args.identifier, seed=args.seed, out=args.out,
-                hyperparams=args.hyperparams, eval_freq=args.eval_freq, command=command, force=args.force)
+                hyperparams=args.hyperparams, eval_freq=args.eval_freq, command=command, force=args.force,
+                model_features=args.model_features)
     print(f"saved {out}/model.zip, {out}/vecnormalize.npz and {out}/run.json")
     return 0
 
@@ -27,6 +28,9 @@ def add_train_parser(sub) -> None:
     p.add_argument("--steps", type=int, default=100_000, help="environment steps (default 100000)")
     p.add_argument("--identifier", action=argparse.BooleanOptionalAction, default=True,
                    help="observe the identified parameters (IdentificationWrapper; default on)")
+    p.add_argument("--model-features", action=argparse.BooleanOptionalAction, default=True,
+                   help="with --identifier: the policy sees the identified model (significant effects, speed over "
+                        "the identified critical speed) rather than the raw regression (default: yes)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="runs/policy", metavar="DIR")
     p.add_argument("--hyperparams", metavar="FILE.yml", help="hyper-parameter table (default: agents/hyperparams.yml)")

@@ -23,6 +23,8 @@ import numpy as np
 import rotor_env  # noqa: F401 - registers the environments
 from rotor_env import IdentificationWrapper
 
+from .features import ModelFeatures, ModelFeatureWrapper
+
 __all__ = ["ALGOS", "TrainedPolicy", "load_hyperparams", "make_env", "train"]
 
 ALGOS = ("ppo", "sac")
@@ -42,20 +44,24 @@ def load_hyperparams(env_id: str, algo: str, path: str | Path | None = None) -> 
     return dict(table[env_id][algo])
 
 
-def make_env(env_id: str, identifier: bool, **env_kwargs) -> gym.Env:
+def make_env(env_id: str, identifier: bool, model_features: bool = False, **env_kwargs) -> gym.Env:
+    """The env as an agent sees it: with the identification wrapper, and optionally the
+    identified model as features (:mod:`agents.features`)."""
     env = gym.make(env_id, **env_kwargs)
     if identifier:
         env = IdentificationWrapper(env)
+        if model_features:
+            env = ModelFeatureWrapper(env)
     return env
 
 
-def _vec_env(env_id: str, identifier: bool, n_envs: int, seed: int, monitor: bool = True):
+def _vec_env(env_id: str, identifier: bool, n_envs: int, seed: int, model_features: bool = False):
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     def factory(i):
         def _make():
-            env = make_env(env_id, identifier)
+            env = make_env(env_id, identifier, model_features)
             env = Monitor(env)
             env.reset(seed=seed + i)
             return env
@@ -88,6 +94,7 @@ class TrainedPolicy:
     clip_obs: float
     epsilon: float
     name: str = "sb3"
+    features: ModelFeatures | None = None
 
     def reset(self) -> None:
         pass
@@ -96,7 +103,10 @@ class TrainedPolicy:
         return np.clip((obs - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon), -self.clip_obs, self.clip_obs)
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        obs = self.normalize(np.asarray(observation, dtype=np.float32)).astype(np.float32)
+        obs = np.asarray(observation, dtype=np.float32)
+        if self.features is not None:  # trained on the identified model as features
+            obs = self.features(obs)
+        obs = self.normalize(obs).astype(np.float32)
         return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
 
     @classmethod
@@ -107,8 +117,10 @@ class TrainedPolicy:
         meta = json.loads((folder / "run.json").read_text())
         algo = {"ppo": PPO, "sac": SAC}[meta["algo"]]
         model = algo.load(folder / "model.zip", device="cpu")
+        features = ModelFeatures.from_json(meta["features"]) if meta.get("features") else None
         with np.load(folder / "vecnormalize.npz", allow_pickle=False) as z:
-            return cls(model, z["obs_mean"], z["obs_var"], float(z["clip_obs"]), float(z["epsilon"]), name)
+            return cls(model, z["obs_mean"], z["obs_var"], float(z["clip_obs"]), float(z["epsilon"]), name,
+                       features)
 
 
 def train(
@@ -125,8 +137,14 @@ def train(
     progress: bool | None = None,
     command: str | None = None,
     force: bool = False,
+    model_features: bool = True,
 ) -> Path:
-    """Train, evaluate during training, save the model and its normalisation statistics."""
+    """Train, evaluate during training, save the model and its normalisation statistics.
+
+    ``model_features`` (with ``identifier``): the policy sees the identified model as
+    features (:class:`agents.features.ModelFeatures`), recorded in ``run.json`` so that
+    :class:`TrainedPolicy` applies the same map.
+    """
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import EvalCallback
     from stable_baselines3.common.vec_env import VecNormalize
@@ -142,8 +160,9 @@ def train(
     hp = load_hyperparams(env_id, algo, hyperparams)
     n_envs = int(hp.pop("n_envs", 1))
     policy = hp.pop("policy", "MlpPolicy")
-    venv = VecNormalize(_vec_env(env_id, identifier, n_envs, seed), norm_obs=True, norm_reward=True)
-    eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed), norm_obs=True,
+    model_features = bool(identifier and model_features)
+    venv = VecNormalize(_vec_env(env_id, identifier, n_envs, seed, model_features), norm_obs=True, norm_reward=True)
+    eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed, model_features), norm_obs=True,
                             norm_reward=False, training=False)
     cls = {"ppo": PPO, "sac": SAC}[algo]
     model = cls(policy, venv, seed=seed, verbose=0, device="cpu", **hp)
@@ -159,8 +178,10 @@ def train(
         "env": env_id, "algo": algo, "steps": int(steps), "identifier": identifier, "seed": seed,
         "n_envs": n_envs, "policy": policy, "hyperparams": hp,
         "command": command or f"rotor-id train --env {env_id} --algo {algo} --steps {steps} "
-        f"{'--identifier' if identifier else '--no-identifier'} --seed {seed} --out {out}",
+        f"{'--identifier' if identifier else '--no-identifier'}{'' if model_features or not identifier else ' --no-model-features'} "
+        f"--seed {seed} --out {out}",
         "eval_mean_reward": float(callback.last_mean_reward) if callback.last_mean_reward > -np.inf else None,
+        "features": venv.venv.envs[0].get_wrapper_attr("features").to_json() if model_features else None,
     }
     (out / "run.json").write_text(json.dumps(run, indent=2))
     venv.close()
