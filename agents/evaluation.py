@@ -72,7 +72,7 @@ def default_agents(env_id: str, env, with_sb3: bool = True) -> dict[str, tuple[o
             "constant_ramp": (ConstantRamp(u.a_max, 0.01), False),
             "fastest": (Fastest(), False),
             "model_based": (ModelBasedRunUp.for_env(env), True),
-            "oracle": (RunUpOracle(u.a_max, u.target_speed, u.t_max), False),
+            "oracle": (RunUpOracle.for_env(env), False),
         }
     elif env_id == BALANCING:
         agents = {

@@ -1,35 +1,31 @@
-"""The run-up oracle: a slow–fast–slow schedule optimised with the true parameters.
+"""The run-up oracle: a schedule optimised on the true rotor for the environment's return.
 
 For each rotor the oracle knows ``params`` and searches a three-phase acceleration
-profile (``slow`` below ``v1``, full drive ``a_max`` from ``v1`` to ``v2``, ``after``
-above) minimising the run-up's peak amplitude, with the time to reach the target
-speed held to the constant-ramp's (``target / 0.01``) — so it shows how close an
-agent that must *learn* the rotor can get.  The search simulates the run with
-:func:`rotor_env.simulator.integrate` directly (a few ms per trial).
+profile — the drive's floor (``u = -1``: the rate that just keeps the deadline) below
+``v1``, full drive ``a_max`` from ``v1`` to ``v2``, ``after`` above — maximising the
+return of the very environment the agents run in (vibration and effort; the deadline is
+kept by the drive), by Nelder–Mead from the slow–fast–slow guess around the true
+critical speed.  It shows how close an agent that must *learn* the rotor can get.
+
+:func:`schedule_peak` is the physics check of the issue: the peak of a three-phase
+run-up simulated with :func:`rotor_env.simulator.integrate` directly.
 """
 
 from __future__ import annotations
 
 import math
 
+import gymnasium as gym
 import numpy as np
 from scipy.optimize import minimize
 
+from rotor_env.envs import RotorRunUpEnv
 from rotor_env.params import RotorParams
 from rotor_env.simulator import Simulator, integrate
 
 from .baselines import Policy
 
 __all__ = ["RunUpOracle", "schedule_peak"]
-
-
-def _schedule(v1: float, v2: float, slow: float, a_max: float, target: float, t_budget: float):
-    """Accelerations for the three phases: ``after`` is set so the budget is met exactly."""
-    t1 = v1 / slow
-    t2 = (v2 - v1) / a_max
-    rest = t_budget - t1 - t2
-    after = (target - v2) / rest if rest > 0 else a_max
-    return slow, min(max(after, 1e-4), a_max)
 
 
 def schedule_peak(params: RotorParams, v1, v2, slow, after, a_max, target, t_end,
@@ -57,40 +53,62 @@ def schedule_peak(params: RotorParams, v1, v2, slow, after, a_max, target, t_end
 
 
 class RunUpOracle(Policy):
-    """Follows the optimised schedule (as a function of speed) for the current rotor."""
+    """Follows the schedule optimised (as a function of speed) for the current rotor.
+
+    ``env_kwargs`` are the run-up environment's (its rewards and limits); ``fit(params)``
+    optimises ``plan = (v1, v2, after)`` for that rotor.
+    """
 
     name = "oracle"
 
-    def __init__(self, a_max: float, target_speed: float, t_max: float, rate: float = 0.01,
-                 max_evaluations: int = 60) -> None:
-        self.a_max, self.target, self.t_max = a_max, target_speed, t_max
+    def __init__(self, env_kwargs: dict | None = None, max_evaluations: int = 40) -> None:
+        self.env = RotorRunUpEnv(**(env_kwargs or {}))
+        self.a_max, self.target = self.env.a_max, self.env.target_speed
         self.max_evaluations = max_evaluations
-        self.t_budget = target_speed / rate
-        self.plan = (0.0, 0.0, rate, rate)
+        self.plan = (0.0, 0.0, 0.0)  # the floor everywhere: the constant ramp
+
+    @classmethod
+    def for_env(cls, env: gym.Env, **kwargs) -> RunUpOracle:
+        """The oracle of ``env``'s run-up task (its constructor arguments)."""
+        spec = env.unwrapped.spec
+        env_kwargs = dict(spec.kwargs) if spec is not None else {}
+        env_kwargs.pop("render_mode", None)
+        return cls(env_kwargs, **kwargs)
+
+    def episode_return(self, params: RotorParams, plan: tuple[float, float, float]) -> float:
+        """The return of one episode on ``params`` following ``plan``."""
+        saved, self.plan = self.plan, plan
+        try:
+            obs, _ = self.env.reset(seed=0, options={"params": params})
+            total, done = 0.0, False
+            while not done:
+                obs, r, term, trunc, _ = self.env.step(self.act(obs))
+                total += float(r)
+                done = term or trunc
+            return total
+        finally:
+            self.plan = saved
 
     def fit(self, params: RotorParams) -> RunUpOracle:
         """Optimise the schedule for ``params`` (Nelder–Mead from the critical speed)."""
         wc = math.sqrt(params.values.get("k", 1.0) / (1.0 - params.ip))
 
         def cost(z):
-            v1, v2, slow = z
-            if not (0.05 < v1 < v2 < self.target and 0.002 <= slow <= self.a_max):
-                return 10.0
-            if v1 / slow + (v2 - v1) / self.a_max >= self.t_budget:
-                return 10.0
-            s, after = _schedule(v1, v2, slow, self.a_max, self.target, self.t_budget)
-            return schedule_peak(params, v1, v2, s, after, self.a_max, self.target, self.t_max)
+            lo, hi, after = z
+            if not (0.05 < lo < hi and 0.0 <= after <= self.a_max):
+                return 1e9
+            return -self.episode_return(params, (lo * wc, hi * wc, after))
 
-        # start from the slow-fast-slow guess around the true critical speed
-        best = minimize(cost, [0.8 * wc, min(1.3 * wc, 0.95 * self.target), 0.008], method="Nelder-Mead",
-                        options={"maxfev": self.max_evaluations, "xatol": 1e-3, "fatol": 1e-4})
-        v1, v2, slow = best.x
-        s, after = _schedule(v1, v2, slow, self.a_max, self.target, self.t_budget)
-        self.plan = (v1, v2, s, after)
+        best = minimize(cost, [0.8, 1.3, 0.015], method="Nelder-Mead",
+                        options={"maxfev": self.max_evaluations, "xatol": 1e-3, "fatol": 1e-3,
+                                 "initial_simplex": [[0.8, 1.3, 0.015], [0.65, 1.3, 0.015], [0.8, 1.6, 0.015],
+                                                     [0.8, 1.3, 0.03]]})
+        lo, hi, after = best.x
+        self.plan = (lo * wc, hi * wc, after)
         return self
 
     def act(self, obs):
-        v1, v2, slow, after = self.plan
+        v1, v2, after = self.plan
         speed = float(obs[0]) * self.target
-        a = slow if speed < v1 else (self.a_max if speed < v2 else after)
-        return np.array([2.0 * a / self.a_max - 1.0], dtype=np.float32)
+        u = -1.0 if speed < v1 else (1.0 if speed < v2 else 2.0 * after / self.a_max - 1.0)
+        return np.array([u], dtype=np.float32)

@@ -32,7 +32,7 @@ def test_every_run_up_baseline_runs_an_episode():
         (ConstantRamp(u.a_max, 0.01), plain),
         (Fastest(), plain),
         (ModelBasedRunUp.for_env(env), None),
-        (RunUpOracle(u.a_max, u.target_speed, u.t_max, max_evaluations=15), plain),
+        (RunUpOracle.for_env(env, max_evaluations=15), plain),
     ]
     results = {type(a).__name__: run_episode(env, a, seed=7, observe_plain=p) for a, p in agents}
     for r in results.values():
@@ -54,14 +54,29 @@ def test_constant_ramp_action_maps_to_the_paper_rate():
     assert batch.shape == (3, 1)
 
 
-def test_oracle_schedule_beats_the_constant_ramp_on_the_true_rotor():
+def test_slow_fast_slow_cuts_the_peak_without_dry_friction():
     """The issue's physics: slow-fast-slow cuts the peak strongly without dry friction."""
     p = RotorParams().replace(h=0.0)
+    wc = np.sqrt(1.0 / (1.0 - p.ip))
     const = schedule_peak(p, 0.0, 0.0, 0.01, 0.01, 0.05, 2.0, 250.0)
-    oracle = RunUpOracle(0.05, 2.0, 250.0, max_evaluations=30).fit(p)
-    best = schedule_peak(p, *oracle.plan, 0.05, 2.0, 250.0)
+    v1, v2, slow = 0.8 * wc, 1.3 * wc, 0.008
+    after = (2.0 - v2) / (200.0 - v1 / slow - (v2 - v1) / 0.05)  # arrive at t = 200 as well
+    best = schedule_peak(p, v1, v2, slow, after, 0.05, 2.0, 250.0)
     assert const == pytest.approx(0.252, abs=0.003)
     assert best < 0.75 * const
+
+
+def test_oracle_beats_the_fixed_schedules_on_the_true_rotor():
+    env = gym.make(RUN_UP)
+    _, info = env.reset(seed=11)
+    oracle = RunUpOracle.for_env(env, max_evaluations=20).fit(info["params"])
+    best = oracle.episode_return(info["params"], oracle.plan)
+    constant = oracle.episode_return(info["params"], (0.0, 0.0, 0.0))  # the floor: the 0.01 ramp
+    fastest = oracle.episode_return(info["params"], (0.0, np.inf, 0.0))
+    assert best > max(constant, fastest)
+    # the same numbers as the environment's own episode with the oracle acting
+    oracle.fit(info["params"])
+    assert run_episode(make_env(RUN_UP, identifier=False), oracle, seed=11)["return"] == pytest.approx(best)
 
 
 def test_balancing_baselines_and_the_model_based_balancer_target():
