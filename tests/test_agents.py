@@ -18,6 +18,7 @@ from agents.evaluation import (
     policy_folder,
     run_episode,
 )
+from agents.features import ModelFeatures
 from agents.oracle import RunUpOracle, schedule_peak
 from agents.training import TrainedPolicy, make_env, train
 from rotor_env import RotorParams
@@ -95,7 +96,9 @@ def test_smoke_training_saves_and_loads(tmp_path):
         assert (out / f).stat().st_size > 0
     meta = json.loads((out / "run.json").read_text())
     assert meta["seed"] == 3 and meta["identifier"] is True and "rotor-id train" in meta["command"]
+    assert meta["features"] is not None  # the identified model as features, applied on load
     policy = TrainedPolicy.load(out)
+    assert isinstance(policy.features, ModelFeatures)
     env = make_env(RUN_UP, identifier=True)
     obs, _ = env.reset(seed=1)
     a1, _ = policy.predict(obs)
@@ -125,3 +128,30 @@ def test_evaluate_cli_json(capsys):
     for name in ("no_control", "model_based", "sb3_identifier", "sb3_plain"):
         assert set(out["agents"][name]) >= {
             "peak_amplitude", "rms_amplitude", "time_to_speed", "effort", "rub_rate", "return"}
+
+
+def test_model_features_keep_the_significant_model_and_place_the_critical_speed():
+    env = make_env(RUN_UP, identifier=True, model_features=True)
+    inner = env.env  # the identification wrapper
+    feats = env.get_wrapper_attr("features")
+    off, lay = inner.offset, inner.layout
+    obs = np.zeros(inner.observation_space.shape, np.float32)
+    obs[0] = 0.5  # speed 1.0 of the target 2.0
+    obs[off + lay["ip"].start] = 0.2
+    obs[off + lay["stiffness.coefficients"].start] = 1.25
+    obs[off + lay["stiffness.significant"].start] = 1.0
+    obs[off + lay["nonlinear_stiffness.coefficients"].start] = 3e5  # not significant: dropped
+    ub = slice(off + lay["unbalance.coefficients"].start, off + lay["unbalance.coefficients"].stop)
+    obs[ub] = [40.0, -0.02]
+    obs[off + lay["unbalance.significant"].start] = 1.0  # significant: clipped to +-10
+    out = feats(obs)
+    assert out.shape == (obs.size + 2,) and env.observation_space.contains(out)
+    assert out[off + lay["nonlinear_stiffness.coefficients"].start] == 0.0
+    np.testing.assert_allclose(out[ub], [10.0, -0.02], rtol=1e-6)
+    assert out[-2] == pytest.approx(1.0 / np.sqrt(1.25 / 0.8)) and out[-1] == 1.0
+    obs[off + lay["stiffness.significant"].start] = 0.0  # stiffness not known: no critical speed
+    assert feats(obs)[-2:].tolist() == [0.0, 0.0]
+    np.testing.assert_array_equal(feats(np.stack([obs, obs]))[1], feats(obs))
+    # the map survives its JSON round trip (run.json)
+    again = ModelFeatures.from_json(json.loads(json.dumps(feats.to_json())))
+    np.testing.assert_array_equal(again(obs), feats(obs))
