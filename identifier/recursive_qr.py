@@ -48,7 +48,10 @@ class RecursiveQR:
 
     * **time update** — each new row ``[x_t, y_t]`` is rotated into ``R`` by ``n+1``
       Givens rotations, after ``R`` is scaled by ``sqrt(lambda)`` (exponential
-      forgetting).  Cost O(n^2) per sample, memory O(n^2), independent of time.
+      forgetting).  Cost O(n^2) per sample, memory O(n^2), independent of time.  When
+      no per-sample history is asked for, :meth:`update_many` reflects blocks of up to
+      64 rows in at once (structured Householder, the same factor to rounding: fewer
+      square roots and vectorised inner loops, ~2-3x faster).
     * **order recursion** — with ``r_{j,y} = R[j, n]`` the last column, the residual
       energy of the model with the first ``i`` regressors is
       ``J_i = R[n, n]^2 + sum_{j >= i} r_{j,y}^2`` and its parameters solve
