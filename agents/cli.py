@@ -28,9 +28,10 @@ def add_train_parser(sub) -> None:
     p.add_argument("--steps", type=int, default=100_000, help="environment steps (default 100000)")
     p.add_argument("--identifier", action=argparse.BooleanOptionalAction, default=True,
                    help="observe the identified parameters (IdentificationWrapper; default on)")
-    p.add_argument("--model-features", action=argparse.BooleanOptionalAction, default=True,
-                   help="with --identifier: the policy sees the identified model (significant effects, speed over "
-                        "the identified critical speed) rather than the raw regression (default: yes)")
+    p.add_argument("--model-features", choices=("compact", "full", "none"), default="compact",
+                   help="with --identifier, what the policy sees of the identified model: 'compact' (default) the "
+                        "speed over the identified critical speed, 'full' also the significant effects' "
+                        "coefficients, 'none' the raw wrapper observation")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="runs/policy", metavar="DIR")
     p.add_argument("--hyperparams", metavar="FILE.yml", help="hyper-parameter table (default: agents/hyperparams.yml)")

@@ -40,8 +40,12 @@ class ModelFeatures:
 
     EXTRA = 2
 
-    def __init__(self, layout: dict[str, slice], offset: int, speed_scale: float, limit: float = 10.0) -> None:
+    def __init__(self, layout: dict[str, slice], offset: int, speed_scale: float, limit: float = 10.0,
+                 compact: bool = False) -> None:
         self.offset, self.speed_scale, self.limit = int(offset), float(speed_scale), float(limit)
+        # compact: only the env observation and what the model says about the critical
+        # speed (the smallest input that carries the identified model into a run-up)
+        self.compact = bool(compact)
         self.layout = {k: slice(v.start, v.stop) for k, v in layout.items()}
         self._effects = [(offset + self.layout[k].start, offset + self.layout[k].stop,
                           offset + self.layout[k.replace(".coefficients", ".significant")].start)
@@ -50,19 +54,20 @@ class ModelFeatures:
         self._ip = self.layout["ip"].start + offset
 
     @classmethod
-    def for_env(cls, env: gym.Env, limit: float = 10.0) -> ModelFeatures:
+    def for_env(cls, env: gym.Env, limit: float = 10.0, compact: bool = False) -> ModelFeatures:
         from .baselines import find_wrapper_attr
 
         return cls(find_wrapper_attr(env, "layout"), find_wrapper_attr(env, "offset"),
-                   float(env.unwrapped._speed_max), limit)
+                   float(env.unwrapped._speed_max), limit, compact)
 
     def to_json(self) -> dict:
         return {"layout": {k: [v.start, v.stop] for k, v in self.layout.items()}, "offset": self.offset,
-                "speed_scale": self.speed_scale, "limit": self.limit}
+                "speed_scale": self.speed_scale, "limit": self.limit, "compact": self.compact}
 
     @classmethod
     def from_json(cls, d: dict) -> ModelFeatures:
-        return cls({k: slice(*v) for k, v in d["layout"].items()}, d["offset"], d["speed_scale"], d["limit"])
+        return cls({k: slice(*v) for k, v in d["layout"].items()}, d["offset"], d["speed_scale"], d["limit"],
+                   bool(d.get("compact", False)))
 
     def _one(self, obs: np.ndarray) -> np.ndarray:
         out = np.empty(obs.shape[0] + self.EXTRA, dtype=np.float32)
@@ -79,6 +84,8 @@ class ModelFeatures:
                 s = min(float(obs[0]) * self.speed_scale / math.sqrt(k / (1.0 - ip)), 3.0)
                 known = 1.0
         out[-2], out[-1] = s, known
+        if self.compact:
+            return np.concatenate([out[: self.offset], out[-2:]])
         return out
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
@@ -91,10 +98,13 @@ class ModelFeatures:
 class ModelFeatureWrapper(gym.ObservationWrapper):
     """Applies :class:`ModelFeatures` to an identification-wrapped env (for training)."""
 
-    def __init__(self, env: gym.Env, features: ModelFeatures | None = None) -> None:
+    def __init__(self, env: gym.Env, features: ModelFeatures | None = None, compact: bool = False) -> None:
         super().__init__(env)
-        self.features = ModelFeatures.for_env(env) if features is None else features
+        self.features = ModelFeatures.for_env(env, compact=compact) if features is None else features
         base = env.observation_space
+        if self.features.compact:
+            off = self.features.offset
+            base = spaces.Box(base.low[:off], base.high[:off], dtype=np.float32)
         self.observation_space = spaces.Box(
             np.concatenate([base.low, np.zeros(ModelFeatures.EXTRA, np.float32)]).astype(np.float32),
             np.concatenate([base.high, np.array([3.0, 1.0], np.float32)]).astype(np.float32),

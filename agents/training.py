@@ -44,18 +44,25 @@ def load_hyperparams(env_id: str, algo: str, path: str | Path | None = None) -> 
     return dict(table[env_id][algo])
 
 
-def make_env(env_id: str, identifier: bool, model_features: bool = False, **env_kwargs) -> gym.Env:
+FEATURES = ("compact", "full", "none")
+
+
+def make_env(env_id: str, identifier: bool, model_features: str = "none", **env_kwargs) -> gym.Env:
     """The env as an agent sees it: with the identification wrapper, and optionally the
-    identified model as features (:mod:`agents.features`)."""
+    identified model as features (:mod:`agents.features`): ``"full"`` (the significant
+    effects' coefficients and the critical-speed ratio), ``"compact"`` (the env
+    observation and the critical-speed ratio only) or ``"none"`` (the raw wrapper)."""
+    if model_features not in FEATURES:
+        raise ValueError(f"model_features must be one of {FEATURES}, got {model_features!r}")
     env = gym.make(env_id, **env_kwargs)
     if identifier:
         env = IdentificationWrapper(env)
-        if model_features:
-            env = ModelFeatureWrapper(env)
+        if model_features != "none":
+            env = ModelFeatureWrapper(env, compact=model_features == "compact")
     return env
 
 
-def _vec_env(env_id: str, identifier: bool, n_envs: int, seed: int, model_features: bool = False):
+def _vec_env(env_id: str, identifier: bool, n_envs: int, seed: int, model_features: str = "none"):
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -137,13 +144,13 @@ def train(
     progress: bool | None = None,
     command: str | None = None,
     force: bool = False,
-    model_features: bool = True,
+    model_features: str = "compact",
 ) -> Path:
     """Train, evaluate during training, save the model and its normalisation statistics.
 
-    ``model_features`` (with ``identifier``): the policy sees the identified model as
-    features (:class:`agents.features.ModelFeatures`), recorded in ``run.json`` so that
-    :class:`TrainedPolicy` applies the same map.
+    ``model_features`` (with ``identifier``; see :func:`make_env`): the policy sees the
+    identified model as features (:class:`agents.features.ModelFeatures`), recorded in
+    ``run.json`` so that :class:`TrainedPolicy` applies the same map.
     """
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import EvalCallback
@@ -160,7 +167,9 @@ def train(
     hp = load_hyperparams(env_id, algo, hyperparams)
     n_envs = int(hp.pop("n_envs", 1))
     policy = hp.pop("policy", "MlpPolicy")
-    model_features = bool(identifier and model_features)
+    if model_features not in FEATURES:
+        raise ValueError(f"model_features must be one of {FEATURES}, got {model_features!r}")
+    model_features = model_features if identifier else "none"
     venv = VecNormalize(_vec_env(env_id, identifier, n_envs, seed, model_features), norm_obs=True, norm_reward=True)
     eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed, model_features), norm_obs=True,
                             norm_reward=False, training=False)
@@ -178,10 +187,10 @@ def train(
         "env": env_id, "algo": algo, "steps": int(steps), "identifier": identifier, "seed": seed,
         "n_envs": n_envs, "policy": policy, "hyperparams": hp,
         "command": command or f"rotor-id train --env {env_id} --algo {algo} --steps {steps} "
-        f"{'--identifier' if identifier else '--no-identifier'}{'' if model_features or not identifier else ' --no-model-features'} "
+        f"{'--identifier' if identifier else '--no-identifier'}{f' --model-features {model_features}' if identifier else ''} "
         f"--seed {seed} --out {out}",
         "eval_mean_reward": float(callback.last_mean_reward) if callback.last_mean_reward > -np.inf else None,
-        "features": venv.venv.envs[0].get_wrapper_attr("features").to_json() if model_features else None,
+        "features": venv.venv.envs[0].get_wrapper_attr("features").to_json() if model_features != "none" else None,
     }
     (out / "run.json").write_text(json.dumps(run, indent=2))
     venv.close()

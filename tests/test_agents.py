@@ -131,7 +131,7 @@ def test_evaluate_cli_json(capsys):
 
 
 def test_model_features_keep_the_significant_model_and_place_the_critical_speed():
-    env = make_env(RUN_UP, identifier=True, model_features=True)
+    env = make_env(RUN_UP, identifier=True, model_features="full")
     inner = env.env  # the identification wrapper
     feats = env.get_wrapper_attr("features")
     off, lay = inner.offset, inner.layout
@@ -155,3 +155,10 @@ def test_model_features_keep_the_significant_model_and_place_the_critical_speed(
     # the map survives its JSON round trip (run.json)
     again = ModelFeatures.from_json(json.loads(json.dumps(feats.to_json())))
     np.testing.assert_array_equal(again(obs), feats(obs))
+    # compact: the env observation and the critical-speed ratio only
+    compact = make_env(RUN_UP, identifier=True, model_features="compact")
+    small = compact.get_wrapper_attr("features")(obs)
+    np.testing.assert_array_equal(small, np.concatenate([obs[:off], feats(obs)[-2:]]))
+    assert compact.observation_space.shape == small.shape and compact.observation_space.contains(small)
+    with pytest.raises(ValueError, match="model_features"):
+        make_env(RUN_UP, identifier=True, model_features="yes")
