@@ -69,23 +69,26 @@ class ModelFeatures:
         return cls({k: slice(*v) for k, v in d["layout"].items()}, d["offset"], d["speed_scale"], d["limit"],
                    bool(d.get("compact", False)))
 
+    def _critical(self, obs: np.ndarray) -> tuple[float, float]:
+        """``(s, known)``: the speed over the identified critical speed, and whether it is known."""
+        if self._k is None:
+            return 0.0, 0.0
+        k = float(obs[self.offset + self._k.start])
+        flag = obs[self.offset + self._k.stop] > 0.5  # the flag follows the coefficient
+        ip = float(obs[self._ip])
+        if not (flag and k > 0.0 and ip < 1.0):
+            return 0.0, 0.0
+        return min(float(obs[0]) * self.speed_scale / math.sqrt(k / (1.0 - ip)), 3.0), 1.0
+
     def _one(self, obs: np.ndarray) -> np.ndarray:
-        out = np.empty(obs.shape[0] + self.EXTRA, dtype=np.float32)
-        out[: obs.shape[0]] = obs
-        for start, stop, flag in self._effects:
-            keep = obs[flag] > 0.5
-            out[start:stop] = np.clip(obs[start:stop], -self.limit, self.limit) if keep else 0.0
-        s, known = 0.0, 0.0
-        if self._k is not None:
-            k = float(obs[self.offset + self._k.start])
-            flag = obs[self.offset + self._k.stop] > 0.5  # the flag follows the coefficient
-            ip = float(obs[self._ip])
-            if flag and k > 0.0 and ip < 1.0:
-                s = min(float(obs[0]) * self.speed_scale / math.sqrt(k / (1.0 - ip)), 3.0)
-                known = 1.0
-        out[-2], out[-1] = s, known
-        if self.compact:
-            return np.concatenate([out[: self.offset], out[-2:]])
+        head = obs[: self.offset] if self.compact else obs
+        out = np.empty(head.shape[0] + self.EXTRA, dtype=np.float32)
+        out[: head.shape[0]] = head
+        if not self.compact:
+            for start, stop, flag in self._effects:
+                keep = obs[flag] > 0.5
+                out[start:stop] = np.clip(obs[start:stop], -self.limit, self.limit) if keep else 0.0
+        out[-2], out[-1] = self._critical(obs)
         return out
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:

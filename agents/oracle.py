@@ -77,17 +77,13 @@ class RunUpOracle(Policy):
 
     def episode_return(self, params: RotorParams, plan: tuple[float, float, float]) -> float:
         """The return of one episode on ``params`` following ``plan``."""
-        saved, self.plan = self.plan, plan
-        try:
-            obs, _ = self.env.reset(seed=0, options={"params": params})
-            total, done = 0.0, False
-            while not done:
-                obs, r, term, trunc, _ = self.env.step(self.act(obs))
-                total += float(r)
-                done = term or trunc
-            return total
-        finally:
-            self.plan = saved
+        obs, _ = self.env.reset(seed=0, options={"params": params})
+        total, done = 0.0, False
+        while not done:
+            obs, r, term, trunc, _ = self.env.step(self._action(plan, obs))
+            total += float(r)
+            done = term or trunc
+        return total
 
     def fit(self, params: RotorParams) -> RunUpOracle:
         """Optimise the schedule for ``params`` (Nelder–Mead from the critical speed)."""
@@ -107,8 +103,11 @@ class RunUpOracle(Policy):
         self.plan = (lo * wc, hi * wc, after)
         return self
 
-    def act(self, obs):
-        v1, v2, after = self.plan
+    def _action(self, plan: tuple[float, float, float], obs) -> np.ndarray:
+        v1, v2, after = plan
         speed = float(obs[0]) * self.target
         u = -1.0 if speed < v1 else (1.0 if speed < v2 else 2.0 * after / self.a_max - 1.0)
         return np.array([u], dtype=np.float32)
+
+    def act(self, obs):
+        return self._action(self.plan, obs)

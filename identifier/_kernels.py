@@ -214,6 +214,15 @@ def update_block(
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def update_blocks(
+    R: np.ndarray, col_sq: np.ndarray, sums: np.ndarray, X: np.ndarray, y: np.ndarray, forgetting: float
+) -> None:
+    """Time update with ``m`` rows, ``BLOCK_ROWS`` at a time (:func:`update_block`)."""
+    for b0 in range(0, X.shape[0], BLOCK_ROWS):
+        update_block(R, col_sq, sums, X[b0 : b0 + BLOCK_ROWS], y[b0 : b0 + BLOCK_ROWS], forgetting)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def update_rows(
     R: np.ndarray,
     col_sq: np.ndarray,
@@ -236,9 +245,8 @@ def update_rows(
     size = n + 1
     sqrt_lam = math.sqrt(forgetting)
     if energies_out.shape[0] == 0 and coef_out.shape[0] == 0:
-        # nothing recorded per sample: rotate the rows in by blocks (same factor, less work)
-        for b0 in range(0, m, BLOCK_ROWS):
-            update_block(R, col_sq, sums, X[b0 : b0 + BLOCK_ROWS], y[b0 : b0 + BLOCK_ROWS], forgetting)
+        # nothing recorded per sample: reflect the rows in by blocks (same factor, less work)
+        update_blocks(R, col_sq, sums, X, y, forgetting)
         return
     row = np.empty(size)
     scratch_row = np.empty(size)

@@ -12,7 +12,7 @@ from numba import njit
 from scipy import special, stats
 
 from identifier import RecursiveQR
-from identifier._kernels import BLOCK_ROWS, clean_factor, nested_energies, snapshot, update_block
+from identifier._kernels import clean_factor, nested_energies, snapshot, update_blocks
 from identifier._special import fdtrc
 
 from .regression import DEFAULT_EFFECTS, RegressionSpec, build_rows
@@ -402,9 +402,7 @@ def _step_kernel(spec: RegressionSpec, masks: np.ndarray, starts: np.ndarray, en
                         y[k] = y[r * per + q]
                     k += 1
         # the same block-by-block update as RecursiveQR.update_many (no histories)
-        for b0 in range(0, k, BLOCK_ROWS):
-            b1 = min(b0 + BLOCK_ROWS, k)
-            update_block(R, col_sq, sums, X[b0:b1], y[b0:b1], cfg[0])
+        update_blocks(R, col_sq, sums, X[:k], y[:k], cfg[0])
         _write_features(R, col_sq, sums, masks, starts, ends, cfg, crit, ip, obs, out)
 
     @njit(error_model="numpy")
