@@ -28,6 +28,10 @@ __all__ = [
 PRIOR_CRITICAL = (math.sqrt(0.64 / 0.9), math.sqrt(1.44 / 0.5))
 
 
+def _layout_json(layout: dict[str, slice]) -> dict[str, list[int]]:
+    return {k: [v.start, v.stop] for k, v in layout.items()}
+
+
 def find_wrapper_attr(env: gym.Env, name: str):
     """An attribute from the outermost wrapper (or the env) that has it."""
     e = env
@@ -110,11 +114,22 @@ class ModelBasedRunUp(Policy):
         lo: float = 0.8,
         hi: float = 1.3,
     ) -> None:
+        self.layout, self.offset = {k: slice(v.start, v.stop) for k, v in layout.items()}, int(offset)
         self.k_idx = offset + layout["stiffness.coefficients"].start
         self.k_flag = offset + layout["stiffness.significant"].start
         self.ip_idx = offset + layout["ip"].start
-        self.a_max, self.target = a_max, target_speed
-        self.slow, self.after, self.lo, self.hi = slow, after, lo, hi
+        self.a_max, self.target = float(a_max), float(target_speed)
+        self.slow, self.after, self.lo, self.hi = float(slow), float(after), float(lo), float(hi)
+
+    def to_json(self) -> dict:
+        """The constructor's arguments (JSON), e.g. for a residual policy's ``run.json``."""
+        return {"layout": _layout_json(self.layout), "offset": self.offset, "a_max": self.a_max,
+                "target_speed": self.target, "slow": self.slow, "after": self.after, "lo": self.lo,
+                "hi": self.hi}
+
+    @classmethod
+    def from_json(cls, d: dict) -> ModelBasedRunUp:
+        return cls(**{**d, "layout": {k: slice(*v) for k, v in d["layout"].items()}})
 
     @classmethod
     def for_env(cls, env: gym.Env, **kwargs) -> ModelBasedRunUp:
@@ -168,12 +183,23 @@ class ModelBasedBalancer(Policy):
     ) -> None:
         from rotor_env.effects import get_effect
 
+        self.layout, self.offset = {k: slice(v.start, v.stop) for k, v in layout.items()}, int(offset)
         sl = layout["unbalance.coefficients"]
         self.coef = slice(offset + sl.start, offset + sl.stop)
         self.ip_idx = offset + layout["ip"].start
         self.columns = get_effect("unbalance").columns
-        self.m_max, self.speed_scale, self.phidd_scale = m_max, speed_scale, phidd_scale
-        self.clearance, self.gain, self.dt = clearance, damping_gain, step_dt
+        self.m_max, self.speed_scale, self.phidd_scale = float(m_max), float(speed_scale), float(phidd_scale)
+        self.clearance, self.gain, self.dt = float(clearance), float(damping_gain), float(step_dt)
+
+    def to_json(self) -> dict:
+        """The constructor's arguments (JSON), e.g. for a residual policy's ``run.json``."""
+        return {"layout": _layout_json(self.layout), "offset": self.offset, "m_max": self.m_max,
+                "speed_scale": self.speed_scale, "phidd_scale": self.phidd_scale, "clearance": self.clearance,
+                "step_dt": self.dt, "damping_gain": self.gain}
+
+    @classmethod
+    def from_json(cls, d: dict) -> ModelBasedBalancer:
+        return cls(**{**d, "layout": {k: slice(*v) for k, v in d["layout"].items()}})
 
     @classmethod
     def for_env(cls, env: gym.Env, **kwargs) -> ModelBasedBalancer:

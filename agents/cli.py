@@ -16,7 +16,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     command = "rotor-id " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["train"] else None
     out = train(args.env, args.algo, args.steps, identifier=args.identifier, seed=args.seed, out=args.out,
                 hyperparams=args.hyperparams, eval_freq=args.eval_freq, command=command, force=args.force,
-                model_features=args.model_features)
+                model_features=args.model_features, residual=args.residual)
     print(f"saved {out}/model.zip, {out}/vecnormalize.npz and {out}/run.json")
     return 0
 
@@ -32,6 +32,9 @@ def add_train_parser(sub) -> None:
                    help="with --identifier, what the policy sees of the identified model: 'compact' (default) the "
                         "speed over the identified critical speed, 'full' also the significant effects' "
                         "coefficients, 'none' the raw wrapper observation")
+    p.add_argument("--residual", type=float, default=0.0, metavar="SCALE",
+                   help="with --identifier, learn a correction of at most SCALE on the env's model-based baseline "
+                        "(residual policy learning; default 0: the network acts alone)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="runs/policy", metavar="DIR")
     p.add_argument("--hyperparams", metavar="FILE.yml", help="hyper-parameter table (default: agents/hyperparams.yml)")

@@ -24,6 +24,7 @@ import rotor_env  # noqa: F401 - registers the environments
 from rotor_env import IdentificationWrapper
 
 from .features import ModelFeatures, ModelFeatureWrapper
+from .residual import Residual, ResidualActionWrapper
 
 __all__ = ["ALGOS", "TrainedPolicy", "load_hyperparams", "make_env", "train"]
 
@@ -32,7 +33,8 @@ ALGOS = ("ppo", "sac")
 EVAL_SEED = 10_000
 
 
-def load_hyperparams(env_id: str, algo: str, path: str | Path | None = None) -> dict:
+def load_hyperparams(env_id: str, algo: str, path: str | Path | None = None, residual: bool = False) -> dict:
+    """The table of ``env_id`` and ``algo``; for a residual policy ``<algo>_residual`` where given."""
     import yaml
 
     text = Path(path).read_text() if path else resources.files("agents").joinpath("hyperparams.yml").read_text()
@@ -41,34 +43,46 @@ def load_hyperparams(env_id: str, algo: str, path: str | Path | None = None) -> 
         raise ValueError(f"no hyper-parameters for {env_id!r}; known: {', '.join(table)}")
     if algo not in table[env_id]:
         raise ValueError(f"no hyper-parameters for {algo!r} on {env_id}; known: {', '.join(table[env_id])}")
+    if residual and f"{algo}_residual" in table[env_id]:
+        return dict(table[env_id][f"{algo}_residual"])
     return dict(table[env_id][algo])
 
 
 FEATURES = ("compact", "full", "none")
 
 
-def make_env(env_id: str, identifier: bool, model_features: str = "none", **env_kwargs) -> gym.Env:
+def make_env(env_id: str, identifier: bool, model_features: str = "none", residual: float = 0.0,
+             **env_kwargs) -> gym.Env:
     """The env as an agent sees it: with the identification wrapper, and optionally the
     identified model as features (:mod:`agents.features`): ``"full"`` (the significant
     effects' coefficients and the critical-speed ratio), ``"compact"`` (the env
-    observation and the critical-speed ratio only) or ``"none"`` (the raw wrapper)."""
+    observation and the critical-speed ratio only) or ``"none"`` (the raw wrapper).
+    ``residual > 0`` (with the identifier): the agent's action is a correction of at most
+    ``residual`` on the env's model-based baseline (:mod:`agents.residual`)."""
     if model_features not in FEATURES:
         raise ValueError(f"model_features must be one of {FEATURES}, got {model_features!r}")
+    if not (np.isfinite(residual) and residual >= 0):
+        raise ValueError(f"residual must be a scale >= 0 (0: no residual), got {residual!r}")
+    if residual and not identifier:
+        raise ValueError("a residual policy builds on the model-based baseline, which needs the identifier")
     env = gym.make(env_id, **env_kwargs)
     if identifier:
         env = IdentificationWrapper(env)
+        if residual:
+            env = ResidualActionWrapper(env, Residual.for_env(env, env_id, residual))
         if model_features != "none":
             env = ModelFeatureWrapper(env, compact=model_features == "compact")
     return env
 
 
-def _vec_env(env_id: str, identifier: bool, n_envs: int, seed: int, model_features: str = "none"):
+def _vec_env(env_id: str, identifier: bool, n_envs: int, seed: int, model_features: str = "none",
+             residual: float = 0.0):
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     def factory(i):
         def _make():
-            env = make_env(env_id, identifier, model_features)
+            env = make_env(env_id, identifier, model_features, residual)
             env = Monitor(env)
             env.reset(seed=seed + i)
             return env
@@ -102,6 +116,7 @@ class TrainedPolicy:
     epsilon: float
     name: str = "sb3"
     features: ModelFeatures | None = None
+    residual: Residual | None = None
 
     def reset(self) -> None:
         pass
@@ -110,11 +125,14 @@ class TrainedPolicy:
         return np.clip((obs - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon), -self.clip_obs, self.clip_obs)
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        obs = np.asarray(observation, dtype=np.float32)
-        if self.features is not None:  # trained on the identified model as features
-            obs = self.features(obs)
+        raw = np.asarray(observation, dtype=np.float32)
+        obs = self.features(raw) if self.features is not None else raw  # trained on the model as features
         obs = self.normalize(obs).astype(np.float32)
-        return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+        action, state = self.model.predict(obs, state=state, episode_start=episode_start,
+                                           deterministic=deterministic)
+        if self.residual is not None:  # the network learned a correction of the baseline
+            action = self.residual(raw, action)
+        return action, state
 
     @classmethod
     def load(cls, folder: str | Path, name: str = "sb3") -> TrainedPolicy:
@@ -125,9 +143,10 @@ class TrainedPolicy:
         algo = {"ppo": PPO, "sac": SAC}[meta["algo"]]
         model = algo.load(folder / "model.zip", device="cpu")
         features = ModelFeatures.from_json(meta["features"]) if meta.get("features") else None
+        residual = Residual.from_json(meta["residual"]) if meta.get("residual") else None
         with np.load(folder / "vecnormalize.npz", allow_pickle=False) as z:
             return cls(model, z["obs_mean"], z["obs_var"], float(z["clip_obs"]), float(z["epsilon"]), name,
-                       features)
+                       features, residual)
 
 
 def train(
@@ -145,12 +164,15 @@ def train(
     command: str | None = None,
     force: bool = False,
     model_features: str = "compact",
+    residual: float = 0.0,
 ) -> Path:
     """Train, evaluate during training, save the model and its normalisation statistics.
 
     ``model_features`` (with ``identifier``; see :func:`make_env`): the policy sees the
     identified model as features (:class:`agents.features.ModelFeatures`), recorded in
-    ``run.json`` so that :class:`TrainedPolicy` applies the same map.
+    ``run.json`` so that :class:`TrainedPolicy` applies the same map.  ``residual``
+    (scale > 0, with ``identifier``): the network learns a correction of the env's
+    model-based baseline (:mod:`agents.residual`), also recorded in ``run.json``.
     """
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import EvalCallback
@@ -164,15 +186,18 @@ def train(
     if out.exists() and any(out.iterdir()) and not force:
         raise FileExistsError(f"{out} exists and is not empty; use --force to overwrite it")
     out.mkdir(parents=True, exist_ok=True)
-    hp = load_hyperparams(env_id, algo, hyperparams)
+    hp = load_hyperparams(env_id, algo, hyperparams, residual=bool(residual))
     n_envs = int(hp.pop("n_envs", 1))
     policy = hp.pop("policy", "MlpPolicy")
     if model_features not in FEATURES:
         raise ValueError(f"model_features must be one of {FEATURES}, got {model_features!r}")
     model_features = model_features if identifier else "none"
-    venv = VecNormalize(_vec_env(env_id, identifier, n_envs, seed, model_features), norm_obs=True, norm_reward=True)
-    eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed, model_features), norm_obs=True,
-                            norm_reward=False, training=False)
+    if residual and not identifier:
+        raise ValueError("--residual builds on the model-based baseline, which needs --identifier")
+    venv = VecNormalize(_vec_env(env_id, identifier, n_envs, seed, model_features, residual), norm_obs=True,
+                        norm_reward=True)
+    eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed, model_features, residual),
+                            norm_obs=True, norm_reward=False, training=False)
     cls = {"ppo": PPO, "sac": SAC}[algo]
     model = cls(policy, venv, seed=seed, verbose=0, device="cpu", **hp)
     callback = EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(1, eval_freq // n_envs),
@@ -187,10 +212,11 @@ def train(
         "env": env_id, "algo": algo, "steps": int(steps), "identifier": identifier, "seed": seed,
         "n_envs": n_envs, "policy": policy, "hyperparams": hp,
         "command": command or f"rotor-id train --env {env_id} --algo {algo} --steps {steps} "
-        f"{'--identifier' if identifier else '--no-identifier'}{f' --model-features {model_features}' if identifier else ''} "
-        f"--seed {seed} --out {out}",
+        f"{'--identifier' if identifier else '--no-identifier'}{f' --model-features {model_features}' if identifier else ''}"
+        f"{f' --residual {residual}' if residual else ''} --seed {seed} --out {out}",
         "eval_mean_reward": float(callback.last_mean_reward) if callback.last_mean_reward > -np.inf else None,
         "features": venv.venv.envs[0].get_wrapper_attr("features").to_json() if model_features != "none" else None,
+        "residual": venv.venv.envs[0].get_wrapper_attr("residual").to_json() if residual else None,
     }
     (out / "run.json").write_text(json.dumps(run, indent=2))
     venv.close()

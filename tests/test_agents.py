@@ -120,6 +120,8 @@ def test_committed_policies_load_and_evaluate_on_three_rotors(env_id):
                                                if k.startswith("sb3")})
     for m in res["agents"].values():
         assert all(np.isfinite(v) for v in m.values())
+    if env_id == RUN_UP:  # the committed run-up agent corrects the model-based scheduler
+        assert TrainedPolicy.load(policy_folder(RUN_UP, True)).residual.base_name == "model_based_runup"
 
 
 def test_evaluate_cli_json(capsys):
@@ -162,3 +164,66 @@ def test_model_features_keep_the_significant_model_and_place_the_critical_speed(
     assert compact.observation_space.shape == small.shape and compact.observation_space.contains(small)
     with pytest.raises(ValueError, match="model_features"):
         make_env(RUN_UP, identifier=True, model_features="yes")
+
+
+def test_residual_wrapper_applies_the_baseline_plus_the_bounded_correction():
+    env = make_env(RUN_UP, identifier=True, model_features="compact", residual=0.5)
+    wrapper = env.env  # inside the feature wrapper: the residual action wrapper
+    residual = env.get_wrapper_attr("residual")
+    base = ModelBasedRunUp.for_env(env)
+    rng = np.random.default_rng(4)
+    raw, _ = wrapper.reset(seed=5)
+    obs, _ = env.reset(seed=5)
+    for _ in range(25):
+        net = rng.uniform(-3, 3, size=1).astype(np.float32)  # out-of-range actions are clipped first
+        expected = np.clip(base.act(raw) + 0.5 * np.clip(net, -1, 1), -1, 1)
+        obs, _, term, trunc, info = env.step(net)
+        np.testing.assert_allclose(info["applied_action"], expected, rtol=0, atol=1e-7)
+        raw = wrapper._obs
+        assert env.observation_space.contains(obs)
+        if term or trunc:
+            break
+    # the JSON description rebuilds the same map (run.json)
+    again = type(residual).from_json(json.loads(json.dumps(residual.to_json())))
+    batch = np.stack([raw, raw])
+    np.testing.assert_array_equal(again(batch, [[0.3], [-2.0]]), residual(batch, [[0.3], [-2.0]]))
+    with pytest.raises(ValueError, match="identifier"):
+        make_env(RUN_UP, identifier=False, residual=0.5)
+    with pytest.raises(ValueError, match="residual"):
+        make_env(RUN_UP, identifier=True, residual=-1.0)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.array([np.nan], np.float32))
+
+
+def test_a_zero_residual_is_the_model_based_baseline():
+    """An untrained correction (zero) acts exactly like the baseline it corrects."""
+
+    class Zero:
+        def reset(self):
+            pass
+
+        def predict(self, obs, deterministic=True):
+            return np.zeros(2, np.float32), None
+
+    env = make_env(BALANCING, identifier=True)
+    res_env = make_env(BALANCING, identifier=True, residual=1.0)
+    a = run_episode(env, ModelBasedBalancer.for_env(env), seed=12)
+    b = run_episode(res_env, Zero(), seed=12)
+    assert a == b
+
+
+def test_smoke_training_of_a_residual_policy(tmp_path):
+    out = train(RUN_UP, "ppo", 512, identifier=True, seed=1, out=tmp_path / "r", eval_freq=512,
+                eval_episodes=1, progress=False, residual=0.25)
+    meta = json.loads((out / "run.json").read_text())
+    assert meta["residual"]["base"] == "model_based_runup" and meta["residual"]["scale"] == 0.25
+    assert "--residual 0.25" in meta["command"]
+    assert meta["hyperparams"]["policy_kwargs"]["log_std_init"] == -1.0  # ppo_residual's table
+    policy = TrainedPolicy.load(out)
+    env = make_env(RUN_UP, identifier=True)
+    raw, _ = env.reset(seed=2)
+    net, _ = policy.model.predict(policy.normalize(policy.features(raw)).astype(np.float32), deterministic=True)
+    action, _ = policy.predict(raw)
+    np.testing.assert_allclose(action, policy.residual(raw, net))
+    with pytest.raises(ValueError, match="identifier"):
+        train(RUN_UP, "ppo", 64, identifier=False, out=tmp_path / "x", residual=0.5, progress=False)
