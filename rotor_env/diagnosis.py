@@ -456,10 +456,21 @@ def order_map(
     Returns ``(speeds, orders, amplitude)`` with ``amplitude[window, order]``.  The
     signal is resampled on a uniform spin-angle grid (order tracking), so a component
     at ``k`` times the spin frequency stays in bin ``k`` while the speed changes.
+
+    Orders count with the direction of rotation: for a rotor turning backwards
+    (``phi`` decreasing) the angle is ``-phi`` and the signal is conjugated, so the
+    unbalance is order +1 either way.  The angle must progress overall; brief
+    reversals (encoder noise, a stall) are held at the angle already reached, because
+    the resampling needs a monotone angle.
     """
+    phi = np.asarray(phi, dtype=float)
+    signal = np.asarray(signal)
+    if phi.size and phi[-1] < phi[0]:  # turning backwards: count angle and orders with the rotation
+        phi, signal = -phi, np.conj(signal)
+    phi = np.maximum.accumulate(phi) if phi.size else phi
     span = 2 * np.pi * revolutions
     n_per = 64 * revolutions
-    starts = np.arange(phi[0], phi[-1] - span, span / 2)
+    starts = np.arange(phi[0], phi[-1] - span, span / 2) if phi.size else np.empty(0)
     speeds, rows = [], []
     freqs = np.fft.fftfreq(n_per, d=1.0 / (64))  # cycles per revolution
     keep = np.abs(freqs) <= max_order
@@ -844,10 +855,11 @@ class Diagnosis:
         ax.set_xlabel("t")
         ax.set_ylabel("equation residual")
         ax.set_title(f"residual of the {which} model ({', '.join(comp.model)}); shaded: above noise floor")
-        top = ax.secondary_xaxis(
-            "top", functions=(lambda x: np.interp(x, self.data.meas.t, self.data.meas.phi_dot),
-                              lambda s: np.interp(s, self.data.meas.phi_dot, self.data.meas.t)))
-        top.set_xlabel("speed")
+        t_m, w_m = self.data.meas.t, self.data.meas.phi_dot
+        if np.all(np.diff(w_m) > 0):  # a speed axis only where speed maps one-to-one onto time
+            top = ax.secondary_xaxis(
+                "top", functions=(lambda x: np.interp(x, t_m, w_m), lambda s: np.interp(s, w_m, t_m)))
+            top.set_xlabel("speed")
         return fig
 
     def plot_order_map(self, ax=None, which: str = "before"):

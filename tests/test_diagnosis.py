@@ -446,3 +446,24 @@ def test_a_growing_crack_is_a_change_not_an_appearance():
     # the opened crack of the other test stays an appearance (no value before)
     opened = diagnose(simulate(RotorParams(crack=Crack(250.0, 0.05)).replace(D=0.0), noise=NOISE, seed=1))
     assert opened.after.splits == ()
+
+
+@pytest.mark.parametrize("direction", [1.0, -1.0])
+def test_order_map_counts_orders_with_the_rotation(direction):
+    """Unbalance-like ``e^{i phi}`` plus a backward 2x component are orders +1 and -2,
+    whichever way the rotor turns, even with a noisy (locally non-monotone) angle."""
+    from rotor_env.diagnosis import order_map
+
+    t = np.linspace(0.0, 200.0, 40001)
+    speed = 0.2 + 0.01 * t
+    phi = direction * (0.2 * t + 0.005 * t**2)
+    phi_meas = phi + np.random.default_rng(0).normal(0, 2e-3, t.size)  # noise: small reversals
+    # the unbalance turns with the rotor (e^{i phi} either way); a 2x component against it
+    z = 0.5 * np.exp(1j * phi) + 0.2 * np.exp(-2j * phi)
+    speeds, orders, amp = order_map(t, phi_meas, speed, z)
+    assert len(speeds) >= 5 and np.all(np.diff(speeds) > 0)  # 38 turns: 8-turn windows, half overlap
+    mean = amp.mean(axis=0)
+    at = {k: mean[np.argmin(abs(orders - k))] for k in (1.0, -1.0, 2.0, -2.0)}
+    assert orders[np.argmax(mean)] == 1.0
+    assert at[1.0] == pytest.approx(0.5, rel=0.05) and at[-2.0] == pytest.approx(0.2, rel=0.05)
+    assert at[-1.0] < 0.01 and at[2.0] < 0.01  # nothing in the mirrored orders
