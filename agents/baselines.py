@@ -18,18 +18,35 @@ __all__ = [
     "ConstantRamp",
     "Fastest",
     "ModelBasedBalancer",
+    "ModelBasedPolicy",
     "ModelBasedRunUp",
     "NoControl",
     "Policy",
     "find_wrapper_attr",
+    "layout_from_json",
+    "layout_to_json",
+    "three_phase_action",
 ]
 
 #: Prior band of critical speeds of the randomised rotors (k in [0.64, 1.44], ip in [0.1, 0.5]).
 PRIOR_CRITICAL = (math.sqrt(0.64 / 0.9), math.sqrt(1.44 / 0.5))
 
 
-def _layout_json(layout: dict[str, slice]) -> dict[str, list[int]]:
+def layout_to_json(layout: dict[str, slice]) -> dict[str, list[int]]:
+    """The identification wrapper's ``layout`` as JSON (``[start, stop]`` per entry)."""
     return {k: [v.start, v.stop] for k, v in layout.items()}
+
+
+def layout_from_json(d: dict[str, list[int]]) -> dict[str, slice]:
+    return {k: slice(*v) for k, v in d.items()}
+
+
+def three_phase_action(speed: float, lo: float, hi: float, slow: float, after: float,
+                       a_max: float) -> np.ndarray:
+    """The run-up command of a slow–fast–slow schedule: ``slow`` below ``lo``, full
+    drive ``a_max`` up to ``hi``, ``after`` above (accelerations mapped to ``u``)."""
+    a = slow if speed < lo else (a_max if speed < hi else after)
+    return np.array([2.0 * a / a_max - 1.0], dtype=np.float32)
 
 
 def find_wrapper_attr(env: gym.Env, name: str):
@@ -59,6 +76,25 @@ class Policy:
         if obs.ndim == 1:
             return self.act(obs).astype(np.float32), state
         return np.stack([self.act(o) for o in obs]).astype(np.float32), state
+
+
+class ModelBasedPolicy(Policy):
+    """Base of the agents that read the identification wrapper's observation.
+
+    Their constructor takes the wrapper's ``layout`` and ``offset`` first and JSON-able
+    numbers after; ``to_json`` lists those arguments so that the agent can be rebuilt
+    (e.g. as a residual policy's baseline, from ``run.json``).
+    """
+
+    def _bind_layout(self, layout: dict[str, slice], offset: int) -> None:
+        self.layout, self.offset = layout_from_json(layout_to_json(layout)), int(offset)
+
+    def to_json(self) -> dict:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    @classmethod
+    def from_json(cls, d: dict):
+        return cls(**{**d, "layout": layout_from_json(d["layout"])})
 
 
 class ConstantRamp(Policy):
@@ -91,7 +127,7 @@ class NoControl(Policy):
         return np.zeros(2, dtype=np.float32)
 
 
-class ModelBasedRunUp(Policy):
+class ModelBasedRunUp(ModelBasedPolicy):
     """Slow–fast–slow: cross the identified critical band at full drive.
 
     The critical speed of the forward whirl is ``sqrt(k / (1 - ip))`` with ``k`` the
@@ -114,7 +150,7 @@ class ModelBasedRunUp(Policy):
         lo: float = 0.8,
         hi: float = 1.3,
     ) -> None:
-        self.layout, self.offset = {k: slice(v.start, v.stop) for k, v in layout.items()}, int(offset)
+        self._bind_layout(layout, offset)
         self.k_idx = offset + layout["stiffness.coefficients"].start
         self.k_flag = offset + layout["stiffness.significant"].start
         self.ip_idx = offset + layout["ip"].start
@@ -123,13 +159,9 @@ class ModelBasedRunUp(Policy):
 
     def to_json(self) -> dict:
         """The constructor's arguments (JSON), e.g. for a residual policy's ``run.json``."""
-        return {"layout": _layout_json(self.layout), "offset": self.offset, "a_max": self.a_max,
+        return {"layout": layout_to_json(self.layout), "offset": self.offset, "a_max": self.a_max,
                 "target_speed": self.target, "slow": self.slow, "after": self.after, "lo": self.lo,
                 "hi": self.hi}
-
-    @classmethod
-    def from_json(cls, d: dict) -> ModelBasedRunUp:
-        return cls(**{**d, "layout": {k: slice(*v) for k, v in d["layout"].items()}})
 
     @classmethod
     def for_env(cls, env: gym.Env, **kwargs) -> ModelBasedRunUp:
@@ -147,11 +179,10 @@ class ModelBasedRunUp(Policy):
     def act(self, obs):
         speed = float(obs[0]) * self.target
         lo, hi = self.band(obs)
-        a = self.slow if speed < lo else (self.a_max if speed < hi else self.after)
-        return np.array([2.0 * a / self.a_max - 1.0], dtype=np.float32)
+        return three_phase_action(speed, lo, hi, self.slow, self.after, self.a_max)
 
 
-class ModelBasedBalancer(Policy):
+class ModelBasedBalancer(ModelBasedPolicy):
     """Cancels the identified unbalance moment (magnitude and phase), plus active damping.
 
     The unbalance moment is the unbalance effect's columns times its identified
@@ -183,7 +214,7 @@ class ModelBasedBalancer(Policy):
     ) -> None:
         from rotor_env.effects import get_effect
 
-        self.layout, self.offset = {k: slice(v.start, v.stop) for k, v in layout.items()}, int(offset)
+        self._bind_layout(layout, offset)
         sl = layout["unbalance.coefficients"]
         self.coef = slice(offset + sl.start, offset + sl.stop)
         self.ip_idx = offset + layout["ip"].start
@@ -193,13 +224,9 @@ class ModelBasedBalancer(Policy):
 
     def to_json(self) -> dict:
         """The constructor's arguments (JSON), e.g. for a residual policy's ``run.json``."""
-        return {"layout": _layout_json(self.layout), "offset": self.offset, "m_max": self.m_max,
+        return {"layout": layout_to_json(self.layout), "offset": self.offset, "m_max": self.m_max,
                 "speed_scale": self.speed_scale, "phidd_scale": self.phidd_scale, "clearance": self.clearance,
                 "step_dt": self.dt, "damping_gain": self.gain}
-
-    @classmethod
-    def from_json(cls, d: dict) -> ModelBasedBalancer:
-        return cls(**{**d, "layout": {k: slice(*v) for k, v in d["layout"].items()}})
 
     @classmethod
     def for_env(cls, env: gym.Env, **kwargs) -> ModelBasedBalancer:

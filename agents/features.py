@@ -28,6 +28,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from .baselines import find_wrapper_attr, layout_from_json, layout_to_json
+
 __all__ = ["ModelFeatureWrapper", "ModelFeatures"]
 
 
@@ -46,7 +48,7 @@ class ModelFeatures:
         # compact: only the env observation and what the model says about the critical
         # speed (the smallest input that carries the identified model into a run-up)
         self.compact = bool(compact)
-        self.layout = {k: slice(v.start, v.stop) for k, v in layout.items()}
+        self.layout = layout_from_json(layout_to_json(layout))  # a copy
         self._effects = [(offset + self.layout[k].start, offset + self.layout[k].stop,
                           offset + self.layout[k.replace(".coefficients", ".significant")].start)
                          for k in self.layout if k.endswith(".coefficients")]
@@ -55,18 +57,16 @@ class ModelFeatures:
 
     @classmethod
     def for_env(cls, env: gym.Env, limit: float = 10.0, compact: bool = False) -> ModelFeatures:
-        from .baselines import find_wrapper_attr
-
         return cls(find_wrapper_attr(env, "layout"), find_wrapper_attr(env, "offset"),
                    float(env.unwrapped._speed_max), limit, compact)
 
     def to_json(self) -> dict:
-        return {"layout": {k: [v.start, v.stop] for k, v in self.layout.items()}, "offset": self.offset,
+        return {"layout": layout_to_json(self.layout), "offset": self.offset,
                 "speed_scale": self.speed_scale, "limit": self.limit, "compact": self.compact}
 
     @classmethod
     def from_json(cls, d: dict) -> ModelFeatures:
-        return cls({k: slice(*v) for k, v in d["layout"].items()}, d["offset"], d["speed_scale"], d["limit"],
+        return cls(layout_from_json(d["layout"]), d["offset"], d["speed_scale"], d["limit"],
                    bool(d.get("compact", False)))
 
     def _critical(self, obs: np.ndarray) -> tuple[float, float]:

@@ -23,7 +23,7 @@ from rotor_env.envs import RotorRunUpEnv
 from rotor_env.params import RotorParams
 from rotor_env.simulator import Simulator, integrate
 
-from .baselines import Policy
+from .baselines import Policy, three_phase_action
 
 __all__ = ["RunUpOracle", "schedule_peak"]
 
@@ -104,10 +104,8 @@ class RunUpOracle(Policy):
         return self
 
     def _action(self, plan: tuple[float, float, float], obs) -> np.ndarray:
-        v1, v2, after = plan
-        speed = float(obs[0]) * self.target
-        u = -1.0 if speed < v1 else (1.0 if speed < v2 else 2.0 * after / self.a_max - 1.0)
-        return np.array([u], dtype=np.float32)
+        v1, v2, after = plan  # below v1 the drive's floor (u = -1: acceleration 0, raised by the env)
+        return three_phase_action(float(obs[0]) * self.target, v1, v2, 0.0, after, self.a_max)
 
     def act(self, obs):
         return self._action(self.plan, obs)

@@ -192,8 +192,6 @@ def train(
     if model_features not in FEATURES:
         raise ValueError(f"model_features must be one of {FEATURES}, got {model_features!r}")
     model_features = model_features if identifier else "none"
-    if residual and not identifier:
-        raise ValueError("--residual builds on the model-based baseline, which needs --identifier")
     venv = VecNormalize(_vec_env(env_id, identifier, n_envs, seed, model_features, residual), norm_obs=True,
                         norm_reward=True)
     eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed, model_features, residual),
