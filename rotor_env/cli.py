@@ -244,12 +244,22 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from .diagnosis import DEFAULT_MODEL, LIBRARY_CANDIDATES, diagnose
+    from .outputs import check_writable
 
-    for target in (args.report, args.figures):
-        if target and Path(target).exists() and not args.force and (
-            Path(target).is_file() or any(Path(target).iterdir())
-        ):
-            raise _UsageError(f"{target} exists; use --force to overwrite it")
+    # check every output target before the computation (a read-only folder, a folder
+    # where a file should go: said now, not after the diagnosis has run)
+    if args.report:
+        check_writable(args.report, overwrite=args.force)
+    if args.figures:
+        figs = Path(args.figures)
+        if figs.exists() and not figs.is_dir():
+            raise _UsageError(f"--figures {figs}: is a file, not a folder")
+        if figs.is_dir() and any(figs.iterdir()) and not args.force:
+            raise _UsageError(f"{figs} exists; use --force to overwrite it")
+        parent = figs if figs.is_dir() else figs.parent
+        if not parent.is_dir():
+            raise _UsageError(f"--figures {figs}: folder {parent} does not exist")
+        check_writable(parent / ".rotor-id-probe", overwrite=True)
     meas, user = _load(args)
     model = _model_list(args.model, DEFAULT_MODEL)
     candidates = [c for c in (*LIBRARY_CANDIDATES, *user) if c not in model]
@@ -377,7 +387,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (_UsageError, ValueError, FileExistsError, FileNotFoundError) as exc:
+    except (_UsageError, ValueError, OSError) as exc:
         print(f"rotor-id {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

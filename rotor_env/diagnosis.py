@@ -59,6 +59,7 @@ from identifier import RecursiveQR, partial_f
 
 from .effects import EFFECTS, PHYSICAL_EFFECTS, Effect, Parameter, get_effect, register_effect
 from .measurements import Measurements
+from .outputs import atomic_write, atomic_write_text, check_writable
 from .params import RotorParams
 from .regression import RegressionSpec, regression_arrays
 from .simulator import SimulationError, free_run
@@ -930,6 +931,9 @@ class Diagnosis:
         ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="lower right")  # on top of both bar sets
         return fig
 
+    #: the figures :meth:`figures` draws, by file name
+    FIGURES = ("compare", "residual", "order_map", "autocorrelation", "candidates", "before_after")
+
     def figures(self) -> dict[str, object]:
         return {
             "compare": self.plot_compare(which="both"),
@@ -940,26 +944,27 @@ class Diagnosis:
             "before_after": self.plot_before_after(),
         }
 
-    def save_figures(self, folder: str | Path) -> list[Path]:
+    def save_figures(self, folder: str | Path, *, overwrite: bool = True) -> list[Path]:
+        """Every figure as ``folder/<name>.png`` (each written atomically)."""
         import matplotlib.pyplot as plt
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         paths = []
         for name, fig in self.figures().items():
-            p = folder / f"{name}.png"
-            fig.savefig(p, dpi=110, bbox_inches="tight")
+            paths.append(atomic_write(
+                folder / f"{name}.png",
+                lambda p, fig=fig: fig.savefig(p, format="png", dpi=110, bbox_inches="tight"),
+                overwrite=overwrite,
+            ))
             plt.close(fig)
-            paths.append(p)
         return paths
 
     def report(self, path: str | Path, *, overwrite: bool = False) -> Path:
         """A self-contained HTML report (figures embedded as PNG)."""
         import matplotlib.pyplot as plt
 
-        path = Path(path)
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path} exists; use --force (overwrite=True) to replace it")
+        path = check_writable(path, overwrite=overwrite)  # before the figures are drawn
         imgs = {}
         for name, fig in self.figures().items():
             buf = io.BytesIO()
@@ -1010,8 +1015,7 @@ tr.missing{{background:#fde0dc}}img{{max-width:100%}}pre{{background:#f4f4f4;pad
 <table><tr><th>coefficient</th><th>estimate</th><th>std. error</th></tr>{coef_rows}</table>
 <pre>{html.escape(self.summary())}</pre>
 </body></html>"""
-        path.write_text(doc, encoding="utf-8")
-        return path
+        return atomic_write_text(path, doc, overwrite=overwrite)
 
 
 def _jsonable(x):

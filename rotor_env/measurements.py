@@ -90,16 +90,23 @@ class Measurements:
         return Measurements(out, self.source)
 
     def to_file(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-        """Write CSV (or Parquet if the name ends in ``.parquet``); never overwrites silently."""
+        """Write CSV (or Parquet if the name ends in ``.parquet``); never overwrites silently.
+
+        The file is written to a temporary name and moved into place when complete
+        (:func:`rotor_env.outputs.atomic_write`): an interrupted write leaves no
+        truncated file that would load cleanly.
+        """
+        from .outputs import atomic_write
+
         path = Path(path)
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path} exists; use --force (overwrite=True) to replace it")
         if path.suffix == ".parquet":
             import pyarrow as pa
             import pyarrow.parquet as pq
 
             table = pa.table({c: self.data[:, i] for i, c in enumerate(COLUMNS)})
-            pq.write_table(table, path)
-        else:
-            np.savetxt(path, self.data, delimiter=",", header=",".join(COLUMNS), comments="", fmt="%.17g")
-        return path
+            return atomic_write(path, lambda tmp: pq.write_table(table, tmp), overwrite=overwrite)
+        return atomic_write(
+            path,
+            lambda tmp: np.savetxt(tmp, self.data, delimiter=",", header=",".join(COLUMNS), comments="", fmt="%.17g"),
+            overwrite=overwrite,
+        )

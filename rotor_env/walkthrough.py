@@ -11,11 +11,11 @@
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 from .diagnosis import diagnose
 from .io import load_measurements
+from .outputs import OutputFolder
 from .params import Crack, RotorParams
 from .simulator import simulate
 
@@ -25,25 +25,25 @@ NOISE = 5e-4
 
 
 def run_walkthrough(out: str | Path = "out/walkthrough", *, force: bool = False, seed: int = 1, print_fn=print):
-    out = Path(out)
-    if out.exists() and any(out.iterdir()):
-        if not force:
-            raise FileExistsError(f"{out} exists and is not empty; use --force to replace it")
-        shutil.rmtree(out)
-    out.mkdir(parents=True, exist_ok=True)
-    data_path = out / "run_up.csv"
+    # --force replaces only the files a previous walkthrough wrote (listed in the folder's
+    # marker); a folder with anything else in it is refused, force or not
+    folder = OutputFolder(out, force=force)
+    out = folder.path
+    data_path = folder.file("run_up.csv")
     print_fn("rotor-id walkthrough: a rotor with a hidden crack\n")
     print_fn(f"1. simulating a run-up (t 0-400, dt 0.01, noise std {NOISE:g} on the six inclination "
              f"channels, seed {seed}) -> {data_path}")
-    simulate(HIDDEN, noise=NOISE, seed=seed).to_file(data_path)
+    simulate(HIDDEN, noise=NOISE, seed=seed).to_file(data_path, overwrite=True)
     meas = load_measurements(data_path)
     print_fn(f"2. the engineer's model: {', '.join(START_MODEL)} (no crack)\n")
     print_fn("3. diagnosing ...\n")
     result = diagnose(meas, START_MODEL, ip=HIDDEN.ip)
     print_fn(result.summary())
+    for name in result.FIGURES:
+        folder.file(f"figures/{name}.png")
     figs = result.save_figures(out / "figures")
-    report = result.report(out / "report.html")
-    (out / "diagnosis.json").write_text(result.to_json(indent=2))
+    report = result.report(folder.file("report.html"), overwrite=True)
+    folder.write_text("diagnosis.json", result.to_json(indent=2))
     print_fn(f"\nfigures: {', '.join(str(p) for p in figs)}")
     print_fn(f"report:  {report}")
     print_fn(f"JSON:    {out / 'diagnosis.json'}")
