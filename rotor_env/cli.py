@@ -283,7 +283,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 def _cmd_fit(args: argparse.Namespace) -> int:
     import json
 
-    from .diagnosis import _jsonable, fit
+    from .diagnosis import fit
+    from .diagnosis.result import _jsonable
 
     meas, _ = _load(args)
     model = _model_list(args.model, ())

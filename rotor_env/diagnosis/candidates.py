@@ -1,0 +1,200 @@
+"""Which effect is missing: candidates ranked, onsets scanned, each checked."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from identifier import RecursiveQR, partial_f
+
+from ..effects import EFFECTS
+from ..regression import RegressionSpec, regression_arrays
+from .compare import Comparison, _Data, _design, _known, compare
+from .orders import complex_rows, order_map
+
+
+# ------------------------------------------------------------------ candidates
+@dataclass
+class Candidate:
+    effect: str
+    F: float
+    log10_p: float
+    rms_after: float
+    fit_percent_after: float
+    energy_drop: float           # fraction of the equation-error energy removed
+    fit_gain: float              # free-run fit % gained
+    significant: bool
+    relevant: bool
+    correlation: float           # multiple correlation of the residual with its columns
+    order_overlap: float         # cosine similarity of order spectra (residual vs columns)
+    onset: float | None          # the effect appears at this time (None: present throughout)
+    story: str
+    comparison: Comparison = field(repr=False)
+
+    def to_dict(self) -> dict:
+        return {
+            "effect": self.effect, "F": self.F, "log10_p": self.log10_p, "rms_after": self.rms_after,
+            "fit_percent_after": self.fit_percent_after, "energy_drop": self.energy_drop,
+            "fit_gain": self.fit_gain, "significant": self.significant, "relevant": self.relevant,
+            "correlation": self.correlation, "order_overlap": self.order_overlap, "onset": self.onset,
+            "declared_orders": list(EFFECTS[self.effect].orders), "story": self.story,
+        }
+
+
+
+
+def _order_profile(data: _Data, values: np.ndarray) -> np.ndarray:
+    m = data.meas
+    z = complex_rows(values, data.equation)
+    _, _, amp = order_map(m.t, m.phi, m.phi_dot, z)
+    return amp.mean(axis=0) if amp.size else np.zeros(1)
+
+
+GRID = 160  # change-point candidates per scan (the Bonferroni factor of the scan)
+#: an onset or change must remove at least this share of the energy the effect explains
+ONSET_SHARE = 0.01
+
+
+def _scan(A: np.ndarray, t_rows: np.ndarray, t_grid: np.ndarray, zero_pre, zero_suf) -> np.ndarray:
+    """Residual energy of ``A = [X y]`` with columns ``zero_pre`` absent before each
+    ``t_c`` and ``zero_suf`` absent after it, for every ``t_c`` in ``t_grid``.
+
+    One forward and one backward recursive-QR pass give the factors of every prefix
+    and suffix; zeroing columns of a factor zeroes them in its rows; stacking the two
+    factors and re-triangularising gives the split model's energy (O(n^3) per t_c).
+    """
+    cuts = np.searchsorted(t_rows, t_grid)
+    n = A.shape[1] - 1
+    pre, fwd, last = [], RecursiveQR(n), 0
+    for c in cuts:
+        fwd.update_many(A[last:c, :-1], A[last:c, -1])
+        pre.append(fwd.R.copy())
+        last = c
+    suf, bwd, last = [None] * len(cuts), RecursiveQR(n), len(A)
+    for i in range(len(cuts) - 1, -1, -1):
+        bwd.update_many(A[cuts[i] : last, :-1], A[cuts[i] : last, -1])
+        suf[i] = bwd.R.copy()
+        last = cuts[i]
+    J = np.empty(len(cuts))
+    for i in range(len(cuts)):
+        top, bot = pre[i].copy(), suf[i].copy()
+        top[:, list(zero_pre)] = 0.0
+        bot[:, list(zero_suf)] = 0.0
+        # drop columns that are zero on both sides (not identifiable anywhere)
+        J[i] = np.linalg.qr(np.vstack([top, bot]), mode="r")[-1, -1] ** 2
+    return J
+
+
+def _grid(data: _Data) -> np.ndarray:
+    t = data.meas.t
+    return np.linspace(t[0], t[-1], GRID + 2)[1:-1]
+
+
+def _appear_scan(data: _Data, base: Comparison, name: str, known: dict) -> tuple[float, float]:
+    """Best onset ``t_c`` for ``name`` appearing mid-run, and the energy with it."""
+    spec, X, y, t_rows, _, _ = _design(data, (*base.model, name), known, base.onsets, base.splits)
+    cols = [spec.columns.index(c) for c in spec.groups[name]]
+    t_grid = _grid(data)
+    J = _scan(np.column_stack([X, y]), t_rows, t_grid, cols, [])
+    k = int(np.argmin(J))
+    return float(t_grid[k]), float(J[k])
+
+
+def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict, alpha: float,
+          min_fit_gain: float, min_energy_drop: float) -> list[Candidate]:
+    out = []
+    n_cand = max(1, len(candidates))
+    res_profile = _order_profile(data, base.residual)
+    for name in candidates:
+        kn = {k: v for k, v in known.items() if k != name}
+        comp = compare(data, (*base.model, name), kn, base.onsets, base.splits)
+        q = comp.n_params - base.n_params
+        dof = comp.n_rows - comp.n_params
+        F, _, lp, _ = partial_f(base.energy, comp.energy, q, dof)
+        F, lp, onset = float(F), float(lp), None
+        # the same effect appearing mid-run (a crack): scan its onset, pay for the scan
+        if q > 0:
+            tc, J_app = _appear_scan(data, base, name, kn)
+            Fa, _, lpa, _ = partial_f(base.energy, J_app, q, dof)
+            lpa = min(0.0, float(lpa) + math.log10(GRID))
+            gain = comp.energy - J_app
+            # the onset must matter twice: against what is left, and against what the
+            # effect explains (on noise-free data what is left is rounding, see _change_time)
+            if (lpa < lp and comp.energy > 0 and gain >= min_energy_drop * comp.energy
+                    and gain >= ONSET_SHARE * (base.energy - comp.energy)):
+                onset = tc
+                F, lp = float(Fa), lpa
+                comp = compare(data, (*base.model, name), kn, {**base.onsets, name: tc}, base.splits)
+        # evidence: correlation of the residual with the candidate's columns, and order overlap
+        spec = RegressionSpec(effects=(name,), equation=data.equation, known={})
+        Xc, _ = regression_arrays(spec, data.data, data.ip)
+        if onset is not None:
+            Xc[np.repeat(data.meas.t, spec.rows_per_sample) < onset] = 0.0
+        est = RecursiveQR(Xc.shape[1]).fit(Xc, base.residual)
+        rr = base.residual @ base.residual
+        corr = math.sqrt(max(0.0, 1.0 - est.residual_energies()[-1] / rr)) if rr > 0 else 0.0
+        prof = _order_profile(data, Xc @ np.ones(Xc.shape[1]))
+        overlap = float(prof @ res_profile / (np.linalg.norm(prof) * np.linalg.norm(res_profile) + 1e-300))
+        drop = (base.energy - comp.energy) / base.energy if base.energy > 0 else 0.0
+        gain = comp.fit_percent - base.fit_percent
+        eff = EFFECTS[name]
+        out.append(Candidate(
+            effect=name, F=F, log10_p=lp, rms_after=comp.rms, fit_percent_after=comp.fit_percent,
+            energy_drop=float(drop), fit_gain=float(gain),
+            significant=bool(q > 0 and lp < math.log10(alpha / n_cand)),
+            # an equation-error gain that makes the output error clearly worse explains the
+            # residual with the wrong physics (e.g. quadratic stiffness for a side load)
+            relevant=bool(gain >= min_fit_gain or (drop >= min_energy_drop and gain > -min_fit_gain)),
+            correlation=float(corr), order_overlap=overlap, onset=onset,
+            story=f"{eff.cause}. Signature: {eff.signature}.", comparison=comp,
+        ))
+    out.sort(key=lambda c: (c.log10_p, -c.F))
+    return out
+
+
+def _appears_or_changes(data: _Data, comp: Comparison, effect: str, alpha: float,
+                        min_energy_drop: float) -> Comparison:
+    """An effect found appearing at ``t_c``: was it there before with another value?
+
+    The split model (own coefficients before ``t_c``) replaces the appearing one when
+    the extra coefficients are significant and remove at least ``min_energy_drop`` of
+    the energy left (a crack that *grows*, D 0.03 -> 0.08, rather than one that opens).
+    """
+    split = compare(data, comp.model, _known(comp.model), comp.onsets, (*comp.splits, effect))
+    q = split.n_params - comp.n_params
+    if q <= 0:
+        return comp
+    _, _, lp, _ = partial_f(comp.energy, split.energy, q, split.n_rows - split.n_params)
+    if float(lp) < math.log10(alpha) and comp.energy - split.energy >= min_energy_drop * comp.energy:
+        return split
+    return comp
+
+
+def _change_time(data: _Data, comp: Comparison, effect: str, known: dict, alpha: float,
+                 min_energy_drop: float) -> float | None:
+    """When an effect in the model changes mid-run: split its coefficient at ``t_c``."""
+    spec, X, y, t_rows, _, _ = _design(data, comp.model, known, comp.onsets, comp.splits)
+    cols = [spec.columns.index(c) for c in spec.groups[effect]]
+    n = X.shape[1]
+    A = np.column_stack([X, X[:, cols], y])  # the effect's columns twice: before | after
+    after = list(range(n, n + len(cols)))
+    t_grid = _grid(data)
+    J = _scan(A, t_rows, t_grid, after, cols)
+    k = int(np.argmin(J))
+    q = len(cols)
+    dof = len(y) - comp.n_params - q
+    _, _, lp, _ = partial_f(comp.energy, J[k], q, dof)
+    drop = comp.energy - J[k]
+    # energy the effect explains in the model: from its test (F of removing it, tested last)
+    sig = comp.significance.get(effect, {})
+    explained = sig.get("F", 0.0) * q * comp.energy / max(len(y) - comp.n_params, 1)
+    # a change must matter against what is left AND against the effect itself: on
+    # noise-free data what is left is integration error, and splitting any coefficient
+    # "removes" a large share of it while changing the value by 1e-5
+    if (float(lp) + math.log10(GRID) < math.log10(alpha) and drop >= min_energy_drop * comp.energy
+            and drop >= ONSET_SHARE * explained):
+        return float(t_grid[k])
+    return None

@@ -1,0 +1,221 @@
+"""Compare a model with measurements: equation-error fit and free-run output error."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from identifier import RecursiveQR
+
+from ..effects import EFFECTS, PHYSICAL_EFFECTS
+from ..measurements import Measurements
+from ..params import RotorParams
+from ..regression import RegressionSpec, regression_arrays
+from ..simulator import SimulationError, free_run
+
+
+# ------------------------------------------------------------------ comparison
+@dataclass
+class Comparison:
+    """A model fitted to measurements and compared with them."""
+
+    model: tuple[str, ...]
+    columns: tuple[str, ...]
+    coefficients: np.ndarray
+    standard_errors: np.ndarray
+    physical: dict[str, float]
+    energy: float              # equation-error residual energy J
+    rms: float                 # equation-error residual RMS
+    r2: float
+    n_rows: int
+    n_params: int
+    fit_x: float
+    fit_y: float
+    fit_bands: list[dict]
+    significance: dict[str, dict]
+    residual: np.ndarray = field(repr=False)
+    onsets: dict[str, float] = field(default_factory=dict)
+    splits: tuple[str, ...] = ()           # effects with onsets whose value changes (not appears)
+    physical_before: dict[str, float] = field(default_factory=dict)  # their values before
+    simulated: Measurements | None = field(repr=False, default=None)
+    diverged: bool = False
+
+    @property
+    def fit_percent(self) -> float:
+        return 0.5 * (self.fit_x + self.fit_y)
+
+    def coefficient_dict(self) -> dict[str, float]:
+        return {c: float(v) for c, v in zip(self.columns, self.coefficients, strict=True)}
+
+
+def _fit_percent(meas: np.ndarray, model: np.ndarray) -> float:
+    den = np.linalg.norm(meas - meas.mean())
+    if den == 0:
+        return 0.0
+    return float(max(-100.0, 100.0 * (1.0 - np.linalg.norm(meas - model) / den)))
+
+
+def _model_params(
+    model: Sequence[str], physical: dict[str, float], ip: float, known: dict, absent: Iterable[str] = ()
+) -> RotorParams:
+    """A simulatable rotor from identified physical parameters (absent effects = 0).
+
+    Every physical effect is in the rotor (those not in the model with their known
+    values, else 0 — the stiffness scale 1); the paper's ``unbalance_in_phase``
+    replaces ``unbalance`` when the model uses it (they share ``tau``).
+    """
+    base = tuple(e for e in PHYSICAL_EFFECTS if not (e == "unbalance" and "unbalance_in_phase" in model))
+    effects = tuple(dict.fromkeys((*base, *model)))
+    values: dict[str, float] = {}
+    for e in effects:
+        for p in EFFECTS[e].parameters:
+            if e in absent:
+                v = 0.0
+            elif e in model:
+                v = physical.get(p.name, 0.0)
+            elif e in known:
+                v = known[e][p.name]
+            else:
+                v = 1.0 if p.name == "k" else 0.0
+            # identified values outside physical bounds (e.g. c < 0) are clipped to them
+            values[p.name] = float(min(max(v, p.lower), p.upper))
+    return RotorParams(ip=ip, values=values, effects=effects)
+
+
+def _bands(speed: np.ndarray, n: int = 6) -> list[tuple[float, float]]:
+    lo, hi = float(speed.min()), float(speed.max())
+    if hi <= lo:
+        return [(lo, hi)]
+    edges = np.linspace(lo, hi, n + 1)
+    return [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+
+class _Data:
+    """Measurements restricted to the informative window, with regression caches."""
+
+    def __init__(self, meas: Measurements, ip: float, equation: str, window_fraction: float, t_start: float | None):
+        self.full = meas
+        amp = np.hypot(meas.theta_x, meas.theta_y)
+        if t_start is None:
+            peak = float(amp.max())
+            k0 = int(np.argmax(amp > window_fraction * peak)) if peak > 0 else 0
+            t_start = float(meas.t[k0])
+        self.t_start = t_start
+        self.meas = meas.slice_time(t_start, None)
+        if len(self.meas) < 20:
+            raise ValueError(f"only {len(self.meas)} samples after t = {t_start:g}: too few to diagnose")
+        self.ip = ip
+        self.equation = equation
+        self.data = np.ascontiguousarray(self.meas.data)
+
+
+def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, float],
+            splits: Iterable[str] = ()):
+    """``spec, X, y, t_rows, columns, groups`` of a model.
+
+    An effect with an onset is zero before it (it *appears*); if it is also in
+    ``splits`` it has its own coefficients before the onset (its value *changes*, a
+    crack that grows), in extra columns named ``<coefficient>_before``.
+    """
+    spec = RegressionSpec(effects=tuple(model), equation=data.equation, known=known or {})
+    X, y = regression_arrays(spec, data.data, data.ip)
+    t_rows = np.repeat(data.meas.t, spec.rows_per_sample)
+    columns, groups, extra = list(spec.columns), dict(spec.groups), []
+    for e, tc in onsets.items():
+        cols = [spec.columns.index(c) for c in spec.groups[e]]
+        before = t_rows < tc
+        if e in splits:
+            extra.append(X[:, cols] * before[:, None])
+            names = tuple(f"{c}_before" for c in spec.groups[e])
+            columns += names
+            groups[f"{e}_before"] = names
+        X[np.ix_(before, cols)] = 0.0
+    if extra:
+        X = np.hstack([X, *extra])
+    return spec, X, y, t_rows, tuple(columns), groups
+
+
+def compare(
+    data: _Data,
+    model: Sequence[str],
+    known: dict | None = None,
+    onsets: dict[str, float] | None = None,
+    splits: Iterable[str] = (),
+    *,
+    simulate: bool = True,
+) -> Comparison:
+    """Fit ``model`` (equation error) and, with ``simulate``, run it free (output error)."""
+    onsets = dict(onsets or {})
+    splits = tuple(e for e in splits if e in onsets)
+    spec, X, y, _, columns, groups = _design(data, model, known or {}, onsets, splits)
+    est = RecursiveQR(columns=columns, groups=groups).fit(X, y)
+    coef = est.coefficients()
+    resid = y - X @ coef
+    J = float(resid @ resid)
+    tss = float(np.sum((y - y.mean()) ** 2))
+    n = spec.n_columns
+    physical = spec.physical(coef[:n])
+    physical_before: dict[str, float] = {}
+    if splits:
+        theta_b = coef[:n].copy()
+        for e in splits:
+            for c in spec.groups[e]:
+                theta_b[spec.columns.index(c)] = coef[columns.index(f"{c}_before")]
+        pb = spec.physical(theta_b)
+        physical_before = {p.name: pb[p.name] for e in splits for p in EFFECTS[e].parameters}
+    sig = est.effect_tests().to_dict()
+    comp = Comparison(
+        model=tuple(model), columns=columns, coefficients=coef, standard_errors=est.standard_errors(),
+        physical=physical, energy=J, rms=math.sqrt(J / len(y)), r2=1.0 - J / tss if tss > 0 else 0.0,
+        n_rows=len(y), n_params=int(est.identifiable().sum()), fit_x=float("nan"), fit_y=float("nan"),
+        fit_bands=[], significance=sig, residual=resid, onsets=onsets, splits=splits,
+        physical_before=physical_before,
+    )
+    if simulate:
+        _free_run(comp, data, spec.known)
+    return comp
+
+
+def _free_run(comp: Comparison, data: _Data, known: dict) -> None:
+    """Output-error simulation, split where an effect appears (it is absent before)."""
+    m = data.meas
+    cuts = sorted({tc for tc in comp.onsets.values() if m.t[0] < tc < m.t[-1]})
+    bounds = [0, *(int(np.searchsorted(m.t, tc)) for tc in cuts), len(m) - 1]
+    state = (m.theta_x[0], m.theta_y[0], m.theta_x_dot[0], m.theta_y_dot[0])
+    pieces = []
+    try:
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            if b <= a:
+                continue
+            pending = {e for e, tc in comp.onsets.items() if tc > m.t[a]}
+            # before its onset an effect is absent, or has its own values if it changes
+            physical = {**comp.physical, **{k: v for k, v in comp.physical_before.items()}} \
+                if pending & set(comp.splits) else comp.physical
+            params = _model_params(comp.model, physical, data.ip, known, pending - set(comp.splits))
+            seg = free_run(params, m.t[a : b + 1], m.phi[a : b + 1], m.phi_dot[a : b + 1], state)
+            pieces.append(seg.data if not pieces else seg.data[1:])
+            state = tuple(seg.data[-1, 4:8])
+    except SimulationError:
+        comp.diverged = True
+        comp.fit_x = comp.fit_y = -100.0
+        return
+    sim = Measurements(np.vstack(pieces))
+    comp.simulated = sim
+    comp.fit_x = _fit_percent(m.theta_x, sim.theta_x)
+    comp.fit_y = _fit_percent(m.theta_y, sim.theta_y)
+    bands = []
+    for lo, hi in _bands(m.phi_dot):
+        sel = (m.phi_dot >= lo) & (m.phi_dot <= hi)
+        if sel.sum() < 10:
+            continue
+        fx = _fit_percent(m.theta_x[sel], sim.theta_x[sel])
+        fy = _fit_percent(m.theta_y[sel], sim.theta_y[sel])
+        bands.append({"speed_min": lo, "speed_max": hi, "fit_percent": 0.5 * (fx + fy)})
+    comp.fit_bands = bands
+
+
+def _known(model: Iterable[str], k: float = 1.0) -> dict:
+    return {} if "stiffness" in model else {"stiffness": {"k": k}}

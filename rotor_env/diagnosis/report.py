@@ -1,0 +1,217 @@
+"""Figures and the self-contained HTML report of a diagnosis."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..outputs import atomic_write, atomic_write_text, check_writable
+from .orders import _first_rows, autocorrelation, complex_rows, order_map
+
+
+class DiagnosisFigures:
+    """The figures of :class:`~rotor_env.diagnosis.Diagnosis` (a mixin: reads its fields)."""
+
+    def _ax(self, ax, figsize=(8, 4)):
+        """``(figure, axes)``: the caller's ``ax`` or a new figure (matplotlib picks the
+        backend: Agg on a machine without a display)."""
+        if ax is None:
+            import matplotlib.pyplot as plt
+
+            fig, ax = plt.subplots(figsize=figsize)
+            return fig, ax
+        return ax.figure, ax
+
+    def plot_compare(self, ax=None, which: str = "after"):
+        """Measured vs model amplitude |theta| against speed (free-run simulation)."""
+        fig, ax = self._ax(ax)
+        m = self.data.meas
+        ax.plot(m.phi_dot, np.hypot(m.theta_x, m.theta_y), "k", lw=1.2, label="measured")
+        for comp, style, label in ((self.before, "C3--", "starting model"), (self.after, "C0", "final model")):
+            if which in ("after", "both") or comp is self.before:
+                if comp.simulated is not None:
+                    s = comp.simulated
+                    ax.plot(s.phi_dot, np.hypot(s.theta_x, s.theta_y), style, lw=1,
+                            label=f"{label}: {', '.join(comp.model)} (fit {comp.fit_percent:.0f} %)")
+        ax.set_xlabel("spin speed (dimensionless)")
+        ax.set_ylabel(r"amplitude $|\theta|$")
+        ax.legend(fontsize=7)
+        ax.set_title("measured vs model response (free run)")
+        return fig
+
+    def plot_residual(self, ax=None, which: str = "before"):
+        """Equation-error residual against time (and speed on a top axis)."""
+        fig, ax = self._ax(ax)
+        comp = self.before if which == "before" else self.after
+        t = np.repeat(self.data.meas.t, 2 if self.equation == "both" else 1)
+        ax.plot(t, comp.residual, lw=0.3, color="C3" if which == "before" else "C0")
+        for w in self.windows if which == "before" else []:
+            ax.axvspan(w["t_start"], w["t_end"], color="orange", alpha=0.2)
+        ax.set_xlabel("t")
+        ax.set_ylabel("equation residual")
+        ax.set_title(f"residual of the {which} model ({', '.join(comp.model)}); shaded: above noise floor")
+        t_m, w_m = self.data.meas.t, self.data.meas.phi_dot
+        if np.all(np.diff(w_m) > 0):  # a speed axis only where speed maps one-to-one onto time
+            top = ax.secondary_xaxis(
+                "top", functions=(lambda x: np.interp(x, t_m, w_m), lambda s: np.interp(s, w_m, t_m)))
+            top.set_xlabel("speed")
+        return fig
+
+    def plot_order_map(self, ax=None, which: str = "before"):
+        """Residual spectrum in rotation orders against speed, 0x/1x/2x marked."""
+        fig, ax = self._ax(ax)
+        comp = self.before if which == "before" else self.after
+        m = self.data.meas
+        speeds, orders, amp = order_map(m.t, m.phi, m.phi_dot, complex_rows(comp.residual, self.equation))
+        if amp.size:
+            mesh = ax.pcolormesh(orders, speeds, np.log10(amp + 1e-12), shading="nearest", cmap="viridis")
+            fig.colorbar(mesh, ax=ax, label="log10 amplitude")
+        for o in (-2, -1, 0, 1, 2):
+            ax.axvline(o, color="w", lw=0.6, ls=":")
+            ax.text(o, speeds.max() if amp.size else 1, f"{o}x", color="k", ha="center", va="bottom", fontsize=8)
+        ax.set_xlabel("rotation order (+ forward, - backward)")
+        ax.set_ylabel("speed")
+        ax.set_title(f"order map of the {which}-model residual")
+        return fig
+
+    def plot_autocorrelation(self, ax=None, which: str = "before", max_lag: int = 400):
+        """Residual autocorrelation with 95 % bounds for white noise."""
+        fig, ax = self._ax(ax)
+        comp = self.before if which == "before" else self.after
+        r = _first_rows(comp.residual, self.equation)
+        ac = autocorrelation(r, max_lag)
+        dt = self.data.meas.dt
+        lags = np.arange(len(ac)) * dt
+        ax.plot(lags, ac, lw=1)
+        b = 1.96 / math.sqrt(len(r))
+        ax.axhspan(-b, b, color="grey", alpha=0.3, label="95 % bounds (white noise)")
+        ax.set_xlabel("lag (time)")
+        ax.set_ylabel("autocorrelation")
+        ax.legend(fontsize=8)
+        ax.set_title(f"residual autocorrelation ({which} model)")
+        return fig
+
+    def plot_candidates(self, ax=None):
+        """The ranking: -log10 p of adding each candidate, with the Bonferroni line."""
+        fig, ax = self._ax(ax)
+        c = self.candidates
+        names = [x.effect for x in c]
+        vals = [max(-x.log10_p, 1e-3) for x in c]
+        colors = ["C3" if x.effect in self.missing else "C7" for x in c]
+        ax.barh(names, vals, color=colors)
+        ax.set_xscale("log")
+        ax.axvline(-math.log10(self.alpha / max(1, len(c))), color="k", ls="--", lw=1, label="alpha / n")
+        ax.invert_yaxis()
+        ax.set_xlabel(r"$-\log_{10} p$ of adding the effect")
+        ax.legend(fontsize=8)
+        ax.set_title("which effect is missing (red: added)")
+        return fig
+
+    def plot_before_after(self, ax=None):
+        """Equation-error RMS and free-run fit % along the forward selection."""
+        fig, ax = self._ax(ax)
+        steps = [self.before, *self.steps]
+        labels = ["start"] + [f"+ {e}" for e in self.missing]
+        x = np.arange(len(steps))
+        ax.bar(x - 0.2, [s.fit_percent for s in steps], 0.4, color="C0", label="free-run fit %")
+        ax.set_ylabel("fit %")
+        ax2 = ax.twinx()
+        ax2.bar(x + 0.2, [s.rms for s in steps], 0.4, color="C3", label="equation RMS")
+        ax2.set_ylabel("equation error RMS")
+        ax.set_xticks(x, labels, rotation=15, fontsize=8)
+        ax.set_title("before and after adding the missing effects")
+        h1, l1 = ax.get_legend_handles_labels()
+        h2, l2 = ax2.get_legend_handles_labels()
+        ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="lower right")  # on top of both bar sets
+        return fig
+
+    #: the figures :meth:`figures` draws, by file name
+    FIGURES = ("compare", "residual", "order_map", "autocorrelation", "candidates", "before_after")
+
+    def figures(self) -> dict[str, object]:
+        return {
+            "compare": self.plot_compare(which="both"),
+            "residual": self.plot_residual(),
+            "order_map": self.plot_order_map(),
+            "autocorrelation": self.plot_autocorrelation(),
+            "candidates": self.plot_candidates(),
+            "before_after": self.plot_before_after(),
+        }
+
+    def save_figures(self, folder: str | Path, *, overwrite: bool = True) -> list[Path]:
+        """Every figure as ``folder/<name>.png`` (each written atomically)."""
+        import matplotlib.pyplot as plt
+
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        paths = []
+        for name, fig in self.figures().items():
+            paths.append(atomic_write(
+                folder / f"{name}.png",
+                lambda p, fig=fig: fig.savefig(p, format="png", dpi=110, bbox_inches="tight"),
+                overwrite=overwrite,
+            ))
+            plt.close(fig)
+        return paths
+
+    def report(self, path: str | Path, *, overwrite: bool = False) -> Path:
+        """A self-contained HTML report (figures embedded as PNG)."""
+        import matplotlib.pyplot as plt
+
+        path = check_writable(path, overwrite=overwrite)  # before the figures are drawn
+        imgs = {}
+        for name, fig in self.figures().items():
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+            plt.close(fig)
+            imgs[name] = base64.b64encode(buf.getvalue()).decode()
+
+        def img(name):
+            return f'<img alt="{name}" src="data:image/png;base64,{imgs[name]}">'
+
+        cand_rows = "".join(
+            f"<tr class='{'missing' if c.effect in self.missing else ''}'><td>{c.effect}</td><td>{c.F:.4g}</td>"
+            f"<td>{c.log10_p:.4g}</td><td>{c.rms_after:.4g}</td><td>{c.fit_percent_after:.1f}</td>"
+            f"<td>{c.correlation:.2f}</td><td>{c.order_overlap:.2f}</td><td>{html.escape(c.story)}</td></tr>"
+            for c in self.candidates
+        )
+        win_rows = "".join(
+            f"<tr><td>{w['t_start']:.1f}</td><td>{w['t_end']:.1f}</td><td>{w['peak_rms_over_floor']:.1f}</td></tr>"
+            for w in self.windows
+        ) or "<tr><td colspan=3>none</td></tr>"
+        coef_rows = "".join(
+            f"<tr><td>{c}</td><td>{v:.5g}</td><td>{s:.2g}</td></tr>"
+            for c, v, s in zip(self.after.columns, self.after.coefficients, self.after.standard_errors, strict=True)
+        )
+        missing = ", ".join(
+            f"<b>{e}</b>" + (f" (from t ≈ {self.onset[e]:.0f})" if self.onset.get(e) is not None else "")
+            for e in self.missing
+        ) or "none"
+        doc = f"""<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">
+<title>rotor-id diagnosis</title>
+<style>body{{font-family:sans-serif;max-width:1000px;margin:auto;padding:1em;color:#222}}
+table{{border-collapse:collapse;margin:.5em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;font-size:13px}}
+tr.missing{{background:#fde0dc}}img{{max-width:100%}}pre{{background:#f4f4f4;padding:.5em}}</style></head><body>
+<h1>rotor-id diagnosis</h1>
+<h2>Summary</h2>
+<p>Data: {html.escape(str(self.source))}; ip = {self.ip:g}; alpha = {self.alpha:g}; informative window t &ge; {self.t_start:g}.</p>
+<p>Starting model: {', '.join(self.start_model)}. Missing: {missing}. Final model: {', '.join(self.model)}.</p>
+<table><tr><th></th><th>equation RMS</th><th>R²</th><th>free-run fit %</th></tr>
+<tr><td>before</td><td>{self.before.rms:.4g}</td><td>{self.before.r2:.4f}</td><td>{self.before.fit_percent:.1f}</td></tr>
+<tr><td>after</td><td>{self.after.rms:.4g}</td><td>{self.after.r2:.4f}</td><td>{self.after.fit_percent:.1f}</td></tr></table>
+<h2>Compare</h2>{img('compare')}
+<h2>Where it fails</h2>{img('residual')}{img('order_map')}{img('autocorrelation')}
+<p>Windows where the residual stands above the noise floor ({self.noise_floor:.3g}):</p>
+<table><tr><th>t start</th><th>t end</th><th>peak RMS / floor</th></tr>{win_rows}</table>
+<h2>Which effect is missing</h2>{img('candidates')}
+<table><tr><th>effect</th><th>F</th><th>log10 p</th><th>RMS after</th><th>fit % after</th><th>corr.</th><th>order overlap</th><th>physical story</th></tr>{cand_rows}</table>
+<h2>Before and after</h2>{img('before_after')}
+<table><tr><th>coefficient</th><th>estimate</th><th>std. error</th></tr>{coef_rows}</table>
+<pre>{html.escape(self.summary())}</pre>
+</body></html>"""
+        return atomic_write_text(path, doc, overwrite=overwrite)
