@@ -45,6 +45,7 @@ __all__ = [
     "hac_covariance",
     "long_run_covariance",
     "score_test",
+    "wald_group_test",
     "wald_test",
 ]
 
@@ -109,9 +110,16 @@ def hac_covariance(X: np.ndarray, resid: np.ndarray, bandwidth: int | None = Non
 
 
 def _chi2_log10_sf(stat: float, q: int) -> float:
+    """log10 of the chi-square survival function, finite far into the tail."""
     if not math.isfinite(stat):
         return 0.0 if stat < 0 else -math.inf
-    return float(stats.chi2.logsf(max(stat, 0.0), q) / math.log(10.0))
+    x = max(stat, 0.0)
+    v = float(stats.chi2.logsf(x, q))
+    if not math.isfinite(v):
+        # the tail's leading term: Q(a, z) ~ z^(a-1) e^-z / Gamma(a), a = q/2, z = x/2
+        a, z = 0.5 * q, 0.5 * x
+        v = (a - 1.0) * math.log(z) - z - math.lgamma(a)
+    return v / math.log(10.0)
 
 
 def wald_test(theta: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
@@ -120,6 +128,21 @@ def wald_test(theta: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
     q = len(theta)
     W = float(theta @ np.linalg.pinv(np.atleast_2d(cov)) @ theta)
     return W / q, _chi2_log10_sf(W, q)
+
+
+def wald_group_test(X: np.ndarray, resid: np.ndarray, theta_group: np.ndarray, group,
+                    bandwidth: int | None = None) -> tuple[float, float]:
+    """HAC Wald test ``(F, log10 p)`` that the coefficients ``theta_group`` of columns
+    ``group`` (indices) of the least-squares fit ``X`` with residual ``resid`` are zero.
+
+    Only the group's block of the sandwich is needed: with ``A`` the group's rows of
+    ``(X'X)^-1``, ``Cov_gg = A S A'`` is the long-run covariance of the ``q``-dimensional
+    series ``(A x_t) e_t`` — ``q^2`` lag sums instead of ``n^2``.
+    """
+    X = np.asarray(X, dtype=float)
+    A = np.linalg.pinv(X.T @ X)[list(group)]
+    u = (X @ A.T) * np.asarray(resid, dtype=float)[:, None]
+    return wald_test(theta_group, long_run_covariance(u, bandwidth))
 
 
 def score_test(X: np.ndarray, Z: np.ndarray, resid: np.ndarray, bandwidth: int | None = None) -> tuple[float, float]:

@@ -40,17 +40,38 @@ __all__ = [
 #: Regularisation of the relative speed in the dry-friction *regressor*:
 #: ``S -> sqrt(S^2 + eps^2)`` (PHYSICS.md: eps = 1e-6 changes the state by < 1e-4).
 FRICTION_EPS = 1e-6
+#: the domain of a magnitude (damping, friction limit, unbalance, stiffness scale)
+_NON_NEGATIVE = (0.0, math.inf)
 
 
 @dataclass(frozen=True)
 class Parameter:
-    """A physical parameter of an effect (dimensionless, PHYSICS.md scaling)."""
+    """A physical parameter of an effect (dimensionless, PHYSICS.md scaling).
+
+    Two ranges: ``domain`` is where the equations are defined (a negative damping or
+    friction limit means nothing; :class:`~rotor_env.params.RotorParams` refuses values
+    outside it), ``[lower, upper]`` is where a physical rotor can lie, with
+    ``bounds_reason`` saying why (the diagnosis rejects a candidate identified outside
+    it: curve-fitting, not physics; a simulation may still go there, e.g. to study an
+    unstable rotor).
+    """
 
     name: str
     default: float  # the paper's Table 1 value
     description: str
     lower: float = -math.inf
     upper: float = math.inf
+    #: why a physical rotor cannot lie outside ``[lower, upper]``: the diagnosis rejects a
+    #: candidate whose identified value does (curve-fitting, not physics)
+    bounds_reason: str = ""
+    domain: tuple[float, float] = (-math.inf, math.inf)
+
+    def contains(self, value: float) -> bool:
+        """Is ``value`` physically plausible (inside ``[lower, upper]``)?"""
+        return self.lower <= value <= self.upper
+
+    def clip_to_domain(self, value: float) -> float:
+        return float(min(max(value, self.domain[0]), self.domain[1]))
 
 
 @dataclass(frozen=True)
@@ -204,7 +225,9 @@ _to, _from = _identity(("c",))
 register_effect(
     Effect(
         name="viscous_damping",
-        parameters=(Parameter("c", 0.03, "viscous damping coefficient c/sqrt(k I_t)", 0.0),),
+        parameters=(Parameter("c", 0.03, "viscous damping coefficient c/sqrt(k I_t)", 0.0, 0.6,
+                            "damping ratio c/2 between 0 and 30 %: a rotor beyond it has no visible critical",
+                            _NON_NEGATIVE),),
         coefficients=("c",),
         columns=_viscous,
         to_coefficients=_to,
@@ -219,7 +242,9 @@ register_effect(
     Effect(
         name="unbalance",
         parameters=(
-            Parameter("tau", 0.02, "unbalance magnitude (dynamic unbalance of the disk)", 0.0),
+            Parameter("tau", 0.02, "unbalance magnitude (dynamic unbalance of the disk)", 0.0, 0.1,
+                      "the tilt of the disk's principal axis [rad]: beyond 0.1 rad (6 deg) no rotor runs",
+                      _NON_NEGATIVE),
             Parameter("beta", 0.0, "unbalance phase angle [rad] relative to phi = 0"),
         ),
         coefficients=("tau_cos_beta", "tau_sin_beta"),
@@ -236,7 +261,8 @@ _to, _from = _identity(("D",))
 register_effect(
     Effect(
         name="asymmetry",
-        parameters=(Parameter("D", 0.03, "stiffness asymmetry (k_u - k_v)/2k: a crack, a keyway"),),
+        parameters=(Parameter("D", 0.03, "stiffness asymmetry (k_u - k_v)/2k: a crack, a keyway", -0.15, 0.15,
+                            "a crack through half the shaft lowers one bending stiffness by about 30 %: |D| <= 0.15"),),
         coefficients=("D",),
         columns=_asymmetry,
         to_coefficients=_to,
@@ -249,15 +275,19 @@ register_effect(
         orders=(1, 2),
     )
 )
+#: quadratic stiffness: at |theta| = 0.3 the quadratic moment stays below a third of the linear one
+_QUADRATIC = (-0.3, 0.3, "a quadratic restoring moment larger than a third of the linear one at 0.3 rad "
+              "is not a weak non-linearity of an elastic shaft")
+_LOAD_REASON = "a static tilt above 0.1 rad bends the shaft beyond its elastic range"
 _to, _from = _identity(("k30", "k21", "k12", "k03"))
 register_effect(
     Effect(
         name="nonlinear_stiffness",
         parameters=(
-            Parameter("k30", 0.05, "quadratic stiffness: th_x^2 in the x moment"),
-            Parameter("k21", 0.04, "quadratic stiffness: th_x^2 in y, 2 th_x th_y in x"),
-            Parameter("k12", 0.03, "quadratic stiffness: 2 th_x th_y in y, th_y^2 in x"),
-            Parameter("k03", 0.02, "quadratic stiffness: th_y^2 in the y moment"),
+            Parameter("k30", 0.05, "quadratic stiffness: th_x^2 in the x moment", *_QUADRATIC),
+            Parameter("k21", 0.04, "quadratic stiffness: th_x^2 in y, 2 th_x th_y in x", *_QUADRATIC),
+            Parameter("k12", 0.03, "quadratic stiffness: 2 th_x th_y in y, th_y^2 in x", *_QUADRATIC),
+            Parameter("k03", 0.02, "quadratic stiffness: th_y^2 in the y moment", *_QUADRATIC),
         ),
         coefficients=("k30", "k21", "k12", "k03"),
         columns=_nonlinear,
@@ -273,7 +303,9 @@ _to, _from = _identity(("h",))
 register_effect(
     Effect(
         name="structural_damping",
-        parameters=(Parameter("h", 0.01, "dry-friction (structural internal damping) moment limit", 0.0),),
+        parameters=(Parameter("h", 0.01, "dry-friction (structural internal damping) moment limit", 0.0, 0.05,
+                            "a friction moment above 5 % of the elastic moment at 1 rad locks the joint: no slip",
+                            _NON_NEGATIVE),),
         coefficients=("h",),
         columns=_dry_friction,
         to_coefficients=_to,
@@ -291,7 +323,9 @@ _to, _from = _identity(("k",))
 register_effect(
     Effect(
         name="stiffness",
-        parameters=(Parameter("k", 1.0, "shaft stiffness scale (natural frequency sqrt(k))", 0.0),),
+        parameters=(Parameter("k", 1.0, "shaft stiffness scale (natural frequency sqrt(k))", 0.25, 4.0,
+                            "the time unit is set by the natural frequency: k outside [0.25, 4] means the data are "
+                            "not in these units (rescale time), not a stiffness change", _NON_NEGATIVE),),
         coefficients=("k",),
         columns=_stiffness,
         to_coefficients=_to,
@@ -306,7 +340,8 @@ _to, _from = _identity(("tau",))
 register_effect(
     Effect(
         name="unbalance_in_phase",
-        parameters=(Parameter("tau", 0.02, "unbalance magnitude with phase known to be 0", 0.0),),
+        parameters=(Parameter("tau", 0.02, "unbalance magnitude with phase known to be 0", -0.1, 0.1,
+                      "as for the unbalance; the sign is the phase 0 or pi"),),
         coefficients=("tau",),
         columns=_unbalance_in_phase,
         to_coefficients=_to,
@@ -323,8 +358,9 @@ register_effect(
     Effect(
         name="static_load",
         parameters=(
-            Parameter("load_y", 0.0, "constant moment in the y equation (gravity, misalignment)"),
-            Parameter("load_x", 0.0, "constant moment in the x equation"),
+            Parameter("load_y", 0.0, "constant moment in the y equation (gravity, misalignment)", -0.1, 0.1,
+                      _LOAD_REASON),
+            Parameter("load_x", 0.0, "constant moment in the x equation", -0.1, 0.1, _LOAD_REASON),
         ),
         coefficients=("load_y", "load_x"),
         columns=_static_load,

@@ -70,10 +70,9 @@ class RotorParams:
                 )
             merged[name] = _finite(name, value)
         for name, p in known.items():
-            if not p.lower <= merged[name] <= p.upper:
-                raise ValueError(
-                    f"parameter {name!r} must be in [{p.lower}, {p.upper}], got {merged[name]}"
-                )
+            lo, hi = p.domain
+            if not lo <= merged[name] <= hi:
+                raise ValueError(f"parameter {name!r} must be in [{lo}, {hi}], got {merged[name]}")
         if self.crack is not None and "asymmetry" not in effects:
             raise ValueError("a crack needs the 'asymmetry' effect")
         object.__setattr__(self, "ip", ip)

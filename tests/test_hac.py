@@ -8,7 +8,14 @@ import statsmodels.api as sm
 from scipy import stats
 from statsmodels.stats.sandwich_covariance import S_hac_simple
 
-from identifier.hac import andrews_bandwidth, hac_covariance, long_run_covariance, score_test, wald_test
+from identifier.hac import (
+    andrews_bandwidth,
+    hac_covariance,
+    long_run_covariance,
+    score_test,
+    wald_group_test,
+    wald_test,
+)
 
 
 def _ar1(rng, m, rho):
@@ -83,3 +90,17 @@ def test_score_test_ignores_columns_in_the_models_span():
     r = rng.normal(size=500)
     F, lp = score_test(X, X[:, :1] * 2.0, r)
     assert F == 0.0 and lp == 0.0
+
+
+def test_wald_group_test_equals_the_full_sandwich():
+    rng = np.random.default_rng(4)
+    m = 3000
+    X = np.column_stack([np.ones(m), np.sin(np.arange(m) * 0.02), rng.normal(size=m), np.cos(np.arange(m) * 0.05)])
+    y = X @ [1.0, 0.5, 0.0, 0.2] + _ar1(rng, m, 0.8)
+    theta = np.linalg.lstsq(X, y, rcond=None)[0]
+    r = y - X @ theta
+    cov = hac_covariance(X, r, 25)
+    for group in ([1], [2, 3]):
+        F, lp = wald_group_test(X, r, theta[group], group, 25)
+        F_ref, lp_ref = wald_test(theta[group], cov[np.ix_(group, group)])
+        assert F == pytest.approx(F_ref, rel=1e-8) and lp == pytest.approx(lp_ref, rel=1e-8)

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from identifier import RecursiveQR, partial_f
+from identifier.hac import wald_group_test
 
 from ..effects import EFFECTS
 from ..regression import RegressionSpec, regression_arrays
@@ -33,6 +34,8 @@ class Candidate:
     onset: float | None          # the effect appears at this time (None: present throughout)
     story: str
     comparison: Comparison = field(repr=False)
+    rejected_by: str | None = None   # the rule that rejected it (None: not rejected / not reached)
+    checks: dict = field(default_factory=dict)  # the physics checks' numbers
 
     def to_dict(self) -> dict:
         return {
@@ -41,6 +44,7 @@ class Candidate:
             "fit_gain": self.fit_gain, "significant": self.significant, "relevant": self.relevant,
             "correlation": self.correlation, "order_overlap": self.order_overlap, "onset": self.onset,
             "declared_orders": list(EFFECTS[self.effect].orders), "story": self.story,
+            "rejected_by": self.rejected_by, "evidence": self.checks,
         }
 
 
@@ -93,46 +97,91 @@ def _grid(data: _Data) -> np.ndarray:
     return np.linspace(t[0], t[-1], GRID + 2)[1:-1]
 
 
+#: points of the fine scan between the coarse grid's neighbours of the best t_c
+FINE = 41
+
+
+def _best_time(A: np.ndarray, t_rows: np.ndarray, t_grid: np.ndarray, zero_pre, zero_suf) -> tuple[float, float]:
+    """The ``t_c`` of least residual energy: the coarse grid, then a fine one around its
+    best point (a change placed a coarse step off leaves a burst of misfit there)."""
+    J = _scan(A, t_rows, t_grid, zero_pre, zero_suf)
+    k = int(np.argmin(J))
+    lo, hi = t_grid[max(k - 1, 0)], t_grid[min(k + 1, len(t_grid) - 1)]
+    if hi > lo:
+        fine = np.linspace(lo, hi, FINE)
+        Jf = _scan(A, t_rows, fine, zero_pre, zero_suf)
+        j = int(np.argmin(Jf))
+        if Jf[j] < J[k]:
+            return float(fine[j]), float(Jf[j])
+    return float(t_grid[k]), float(J[k])
+
+
 def _appear_scan(data: _Data, base: Comparison, name: str, known: dict) -> tuple[float, float]:
     """Best onset ``t_c`` for ``name`` appearing mid-run, and the energy with it."""
     spec, X, y, t_rows, _, _ = _design(data, (*base.model, name), known, base.onsets, base.splits)
     cols = [spec.columns.index(c) for c in spec.groups[name]]
-    t_grid = _grid(data)
-    J = _scan(np.column_stack([X, y]), t_rows, t_grid, cols, [])
-    k = int(np.argmin(J))
-    return float(t_grid[k]), float(J[k])
+    return _best_time(np.column_stack([X, y]), t_rows, _grid(data), cols, [])
+
+
+def _candidate_columns(data: _Data, name: str, onset: float | None) -> np.ndarray:
+    """The candidate's regressor columns on the window's rows (zero before an onset)."""
+    spec = RegressionSpec(effects=(name,), equation=data.equation, known={})
+    Z, _ = regression_arrays(spec, data.data, data.ip)
+    if onset is not None:
+        Z[np.repeat(data.meas.t, spec.rows_per_sample) < onset] = 0.0
+    return Z
+
+
+def _wald(data: _Data, comp: Comparison, name: str, known: dict, null=None) -> tuple[float, float]:
+    """HAC Wald test of ``name``'s coefficients in the fitted model ``comp`` against ``null``
+    (0, or the value the base model assumed for it — the stiffness scale 1)."""
+    _, X, _, _, columns, groups = _design(data, comp.model, known, comp.onsets, comp.splits)
+    keep = np.flatnonzero(np.linalg.norm(X, axis=0) > 0)
+    group = [c for c in (columns.index(c) for c in groups[name]) if c in set(keep.tolist())]
+    if not group:
+        return 0.0, 0.0
+    pos = [keep.tolist().index(g) for g in group]
+    theta = comp.coefficients[group] - (0.0 if null is None else np.asarray(null, dtype=float)[:len(group)])
+    return wald_group_test(X[:, keep], comp.residual, theta, pos)
 
 
 def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict, alpha: float,
           min_fit_gain: float, min_energy_drop: float) -> list[Candidate]:
+    """Every candidate's evidence for being added to ``base`` (best first).
+
+    The test of adding an effect is the HAC Wald test of its coefficients in the
+    augmented model (:func:`identifier.hac.wald_group_test`), valid when the residual is
+    autocorrelated; the change-point scan finds the onset by least residual energy and
+    pays a Bonferroni factor of ``GRID`` for having searched.
+    """
     out = []
     n_cand = max(1, len(candidates))
     res_profile = _order_profile(data, base.residual)
     for name in candidates:
         kn = {k: v for k, v in known.items() if k != name}
+        null = EFFECTS[name].to_coefficients(known[name]) if name in known else None
         comp = compare(data, (*base.model, name), kn, base.onsets, base.splits)
         q = comp.n_params - base.n_params
-        dof = comp.n_rows - comp.n_params
-        F, _, lp, _ = partial_f(base.energy, comp.energy, q, dof)
-        F, lp, onset = float(F), float(lp), None
+        F, lp = _wald(data, comp, name, kn, null) if q > 0 else (0.0, 0.0)
+        onset = None
         # the same effect appearing mid-run (a crack): scan its onset, pay for the scan
         if q > 0:
             tc, J_app = _appear_scan(data, base, name, kn)
-            Fa, _, lpa, _ = partial_f(base.energy, J_app, q, dof)
-            lpa = min(0.0, float(lpa) + math.log10(GRID))
             gain = comp.energy - J_app
             # the onset must matter twice: against what is left, and against what the
             # effect explains (on noise-free data what is left is rounding, see _change_time)
-            if (lpa < lp and comp.energy > 0 and gain >= min_energy_drop * comp.energy
+            if (comp.energy > 0 and gain >= min_energy_drop * comp.energy
                     and gain >= ONSET_SHARE * (base.energy - comp.energy)):
-                onset = tc
-                F, lp = float(Fa), lpa
-                comp = compare(data, (*base.model, name), kn, {**base.onsets, name: tc}, base.splits)
+                at = compare(data, (*base.model, name), kn, {**base.onsets, name: tc}, base.splits,
+                             simulate=False)
+                Fa, lpa = _wald(data, at, name, kn, null)
+                lpa = min(0.0, lpa + math.log10(GRID))
+                if lpa < lp:
+                    onset = tc
+                    F, lp = Fa, lpa
+                    comp = compare(data, (*base.model, name), kn, {**base.onsets, name: tc}, base.splits)
         # evidence: correlation of the residual with the candidate's columns, and order overlap
-        spec = RegressionSpec(effects=(name,), equation=data.equation, known={})
-        Xc, _ = regression_arrays(spec, data.data, data.ip)
-        if onset is not None:
-            Xc[np.repeat(data.meas.t, spec.rows_per_sample) < onset] = 0.0
+        Xc = _candidate_columns(data, name, onset)
         est = RecursiveQR(Xc.shape[1]).fit(Xc, base.residual)
         rr = base.residual @ base.residual
         corr = math.sqrt(max(0.0, 1.0 - est.residual_energies()[-1] / rr)) if rr > 0 else 0.0
@@ -142,7 +191,7 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
         gain = comp.fit_percent - base.fit_percent
         eff = EFFECTS[name]
         out.append(Candidate(
-            effect=name, F=F, log10_p=lp, rms_after=comp.rms, fit_percent_after=comp.fit_percent,
+            effect=name, F=float(F), log10_p=float(lp), rms_after=comp.rms, fit_percent_after=comp.fit_percent,
             energy_drop=float(drop), fit_gain=float(gain),
             significant=bool(q > 0 and lp < math.log10(alpha / n_cand)),
             # an equation-error gain that makes the output error clearly worse explains the
@@ -181,13 +230,11 @@ def _change_time(data: _Data, comp: Comparison, effect: str, known: dict, alpha:
     n = X.shape[1]
     A = np.column_stack([X, X[:, cols], y])  # the effect's columns twice: before | after
     after = list(range(n, n + len(cols)))
-    t_grid = _grid(data)
-    J = _scan(A, t_rows, t_grid, after, cols)
-    k = int(np.argmin(J))
+    t_c, J_c = _best_time(A, t_rows, _grid(data), after, cols)
     q = len(cols)
     dof = len(y) - comp.n_params - q
-    _, _, lp, _ = partial_f(comp.energy, J[k], q, dof)
-    drop = comp.energy - J[k]
+    _, _, lp, _ = partial_f(comp.energy, J_c, q, dof)
+    drop = comp.energy - J_c
     # energy the effect explains in the model: from its test (F of removing it, tested last)
     sig = comp.significance.get(effect, {})
     explained = sig.get("F", 0.0) * q * comp.energy / max(len(y) - comp.n_params, 1)
@@ -196,5 +243,5 @@ def _change_time(data: _Data, comp: Comparison, effect: str, known: dict, alpha:
     # "removes" a large share of it while changing the value by 1e-5
     if (float(lp) + math.log10(GRID) < math.log10(alpha) and drop >= min_energy_drop * comp.energy
             and drop >= ONSET_SHARE * explained):
-        return float(t_grid[k])
+        return t_c
     return None

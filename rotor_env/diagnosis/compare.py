@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from identifier import RecursiveQR
+from identifier.hac import hac_covariance, wald_test
 
 from ..effects import EFFECTS, PHYSICAL_EFFECTS
 from ..measurements import Measurements
@@ -42,6 +43,7 @@ class Comparison:
     physical_before: dict[str, float] = field(default_factory=dict)  # their values before
     simulated: Measurements | None = field(repr=False, default=None)
     diverged: bool = False
+    covariance: np.ndarray | None = field(repr=False, default=None)  # HAC, when robust
 
     @property
     def fit_percent(self) -> float:
@@ -80,8 +82,9 @@ def _model_params(
                 v = known[e][p.name]
             else:
                 v = 1.0 if p.name == "k" else 0.0
-            # identified values outside physical bounds (e.g. c < 0) are clipped to them
-            values[p.name] = float(min(max(v, p.lower), p.upper))
+            # identified values where the equations are undefined (c < 0) are clipped to
+            # their domain so the free run can be simulated
+            values[p.name] = p.clip_to_domain(v)
     return RotorParams(ip=ip, values=values, effects=effects)
 
 
@@ -93,10 +96,49 @@ def _bands(speed: np.ndarray, n: int = 6) -> list[tuple[float, float]]:
     return [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
 
-class _Data:
-    """Measurements restricted to the informative window, with regression caches."""
+#: the prefilter passes rotation orders up to this multiple of the top speed undistorted enough
+#: for the non-linear columns (products of a 1x response and the 2x spin reach 3x; and at
+#: least this many radians per time unit: the natural frequency is 1)
+PREFILTER_ORDERS = 10.0
 
-    def __init__(self, meas: Measurements, ip: float, equation: str, window_fraction: float, t_start: float | None):
+
+#: channel noise below this fraction of the peak inclination is not worth a prefilter
+NOISE_DETECTION = 1e-4
+
+
+def _white_level(x: np.ndarray) -> float:
+    """White-noise standard deviation of a sampled channel (third differences: a smooth
+    signal vanishes in them, white noise grows by sqrt(20))."""
+    d = np.diff(x, 3)
+    return float(np.median(np.abs(d - np.median(d))) / 0.6745 / math.sqrt(20.0)) if len(d) else 0.0
+
+
+def prefilter_cutoff(speed: np.ndarray, dt: float) -> float | None:
+    """Cut-off (cycles per time unit) of the noise prefilter, or None when it gains little.
+
+    The rotor's response lives below ``PREFILTER_ORDERS`` x the top spin speed (orders up
+    to 3, whirls near the natural frequency); white sensor noise spreads to the Nyquist
+    frequency.  Removing it before the regression is what keeps the errors-in-variables
+    bias of ``c`` and ``h`` small: the dry-friction column ``v/|v|`` is non-linear in
+    the noisy rates, and near break-away ``|v|`` is comparable to the noise.
+    """
+    top = max(PREFILTER_ORDERS * float(np.max(np.abs(speed))), PREFILTER_ORDERS)
+    fc = top / (2.0 * math.pi)
+    return fc if fc < 0.2 / dt else None
+
+
+class _Data:
+    """Measurements restricted to the informative window, prefiltered, with caches.
+
+    ``raw`` keeps the unfiltered samples of the window (the noise floor is read from
+    them); ``data``/``meas`` are the prefiltered ones every fit uses.  ``noise_gain``
+    is the factor by which the prefilter scales white noise's RMS (1 without it).
+    """
+
+    def __init__(self, meas: Measurements, ip: float, equation: str, window_fraction: float,
+                 t_start: float | None, prefilter: bool = True):
+        from scipy.signal import butter, sosfiltfilt
+
         self.full = meas
         amp = np.hypot(meas.theta_x, meas.theta_y)
         if t_start is None:
@@ -104,24 +146,40 @@ class _Data:
             k0 = int(np.argmax(amp > window_fraction * peak)) if peak > 0 else 0
             t_start = float(meas.t[k0])
         self.t_start = t_start
-        self.meas = meas.slice_time(t_start, None)
-        if len(self.meas) < 20:
-            raise ValueError(f"only {len(self.meas)} samples after t = {t_start:g}: too few to diagnose")
+        self.raw = meas.slice_time(t_start, None)
+        if len(self.raw) < 20:
+            raise ValueError(f"only {len(self.raw)} samples after t = {t_start:g}: too few to diagnose")
+        dt = float(np.median(np.diff(meas.t)))
+        # the prefilter is for sensor noise: a record without any (a simulation) keeps its samples
+        noisy = _white_level(meas.theta_x) + _white_level(meas.theta_y) > NOISE_DETECTION * float(amp.max())
+        self.cutoff = prefilter_cutoff(meas.phi_dot, dt) if prefilter and noisy and len(meas) > 60 else None
+        self.noise_gain = 1.0
+        filtered = meas
+        if self.cutoff is not None:
+            sos = butter(4, self.cutoff, fs=1.0 / dt, output="sos")
+            out = meas.data.copy()
+            out[:, 4:] = sosfiltfilt(sos, out[:, 4:], axis=0)  # the six inclination channels
+            filtered = Measurements(out, meas.source)
+            impulse = np.zeros(4001)
+            impulse[2000] = 1.0
+            self.noise_gain = float(np.linalg.norm(sosfiltfilt(sos, impulse)))
+        self.meas = filtered.slice_time(t_start, None)
         self.ip = ip
         self.equation = equation
         self.data = np.ascontiguousarray(self.meas.data)
+        self.raw_data = np.ascontiguousarray(self.raw.data)
 
 
 def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, float],
-            splits: Iterable[str] = ()):
-    """``spec, X, y, t_rows, columns, groups`` of a model.
+            splits: Iterable[str] = (), *, raw: bool = False):
+    """``spec, X, y, t_rows, columns, groups`` of a model (``raw``: on the unfiltered samples).
 
     An effect with an onset is zero before it (it *appears*); if it is also in
     ``splits`` it has its own coefficients before the onset (its value *changes*, a
     crack that grows), in extra columns named ``<coefficient>_before``.
     """
     spec = RegressionSpec(effects=tuple(model), equation=data.equation, known=known or {})
-    X, y = regression_arrays(spec, data.data, data.ip)
+    X, y = regression_arrays(spec, data.raw_data if raw else data.data, data.ip)
     t_rows = np.repeat(data.meas.t, spec.rows_per_sample)
     columns, groups, extra = list(spec.columns), dict(spec.groups), []
     for e, tc in onsets.items():
@@ -146,8 +204,15 @@ def compare(
     splits: Iterable[str] = (),
     *,
     simulate: bool = True,
+    robust: bool = False,
+    alpha: float = 0.05,
 ) -> Comparison:
-    """Fit ``model`` (equation error) and, with ``simulate``, run it free (output error)."""
+    """Fit ``model`` (equation error) and, with ``simulate``, run it free (output error).
+
+    With ``robust`` the standard errors and the effect tests are the HAC (Newey–West)
+    ones of :mod:`identifier.hac`, valid on an autocorrelated residual; without it they
+    are the classical ones (cheaper: used while ranking, never reported).
+    """
     onsets = dict(onsets or {})
     splits = tuple(e for e in splits if e in onsets)
     spec, X, y, _, columns, groups = _design(data, model, known or {}, onsets, splits)
@@ -174,9 +239,42 @@ def compare(
         fit_bands=[], significance=sig, residual=resid, onsets=onsets, splits=splits,
         physical_before=physical_before,
     )
+    if robust:
+        _robust_statistics(comp, X, groups, alpha)
     if simulate:
         _free_run(comp, data, spec.known)
     return comp
+
+
+def make_robust(data: _Data, comp: Comparison, alpha: float = 0.05) -> Comparison:
+    """Replace ``comp``'s standard errors and effect tests by the HAC ones (in place)."""
+    _, X, _, _, _, groups = _design(data, comp.model, _known(comp.model), comp.onsets, comp.splits)
+    _robust_statistics(comp, X, groups, alpha)
+    return comp
+
+
+def _robust_statistics(comp: Comparison, X: np.ndarray, groups: dict[str, tuple[str, ...]],
+                       alpha: float = 0.05) -> None:
+    """HAC standard errors and effect-last Wald tests (see :mod:`identifier.hac`)."""
+    cols = list(comp.columns)
+    keep = np.flatnonzero(np.linalg.norm(X, axis=0) > 0)  # columns zero throughout: no estimate
+    cov = np.zeros((len(cols), len(cols)))
+    if keep.size:
+        cov[np.ix_(keep, keep)] = hac_covariance(X[:, keep], comp.residual)
+    comp.covariance = cov
+    comp.standard_errors = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    sig = {}
+    for name, group in groups.items():
+        idx = [cols.index(c) for c in group if cols.index(c) in set(keep.tolist())]
+        if not idx:
+            sig[name] = {"F": 0.0, "df_num": 0.0, "df_den": float(comp.n_rows), "p_value": 1.0,
+                         "log10_p": 0.0, "testable": False, "significant": False}
+            continue
+        F, lp = wald_test(comp.coefficients[idx], cov[np.ix_(idx, idx)])
+        sig[name] = {"F": F, "df_num": float(len(idx)), "df_den": float(comp.n_rows - comp.n_params),
+                     "p_value": float(10.0**lp), "log10_p": lp, "testable": True,
+                     "significant": bool(lp < math.log10(alpha)), "test": "HAC Wald"}
+    comp.significance = sig
 
 
 def _free_run(comp: Comparison, data: _Data, known: dict) -> None:

@@ -14,6 +14,57 @@ from .compare import Comparison, _Data, _known, compare
 from .model import Model
 from .report import DiagnosisFigures
 
+VERDICT_TEXT = {
+    "explained": "the starting model explains the data: residual {ratio:.2g}x the noise floor ({floor:.3g})",
+    "explained_after_adding": "explained after adding the missing effects: residual {ratio:.2g}x the noise "
+    "floor ({floor:.3g})",
+    "partly_explained": "effects were added, but the residual still stands at {ratio:.2g}x the noise floor "
+    "({floor:.3g}): something the library does not hold is left",
+    "unexplained": "the residual stands at {ratio:.2g}x the noise floor ({floor:.3g}) and no library effect "
+    "explains it (see the candidates turned down)",
+}
+
+
+@dataclass
+class NotIdentifiableResult:
+    """A record that cannot decide anything (no excitation, too short): said, not guessed."""
+
+    source: str | None
+    reason: str
+    ip: float | None = None
+    notes: list[str] = field(default_factory=list)
+    verdict: str = "not_identifiable"
+    missing: list[str] = field(default_factory=list)
+    rejected: list[dict] = field(default_factory=list)
+    unexplained: dict | None = None
+    noise_floor: float = math.nan
+    rms_ratio_after: float = math.nan
+
+    def to_dict(self) -> dict:
+        return {"source": self.source, "verdict": self.verdict, "reason": self.reason, "ip": self.ip,
+                "ip_estimate": None, "missing": [], "rejected": [], "unexplained": None,
+                "noise_floor": None, "rms_ratio_after": None, "notes": self.notes}
+
+    def to_json(self, **kwargs) -> str:
+        return json.dumps(_jsonable(self.to_dict()), **kwargs)
+
+    def summary(self) -> str:
+        return (f"rotor-id diagnosis of {self.source or 'measurements'}\n"
+                f"VERDICT: not_identifiable — {self.reason}\n"
+                "Nothing is said about the rotor's effects: the record cannot decide them.")
+
+    def save_figures(self, folder, *, overwrite: bool = True) -> list:
+        return []
+
+    def report(self, path, *, overwrite: bool = False):
+        import html
+
+        from ..outputs import atomic_write_text
+
+        doc = ("<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>rotor-id diagnosis</title>"
+               f"</head><body><h1>rotor-id diagnosis</h1><pre>{html.escape(self.summary())}</pre></body></html>")
+        return atomic_write_text(path, doc, overwrite=overwrite)
+
 
 # ------------------------------------------------------------------ the result
 @dataclass
@@ -36,15 +87,26 @@ class Diagnosis(DiagnosisFigures):
     noise_floor: float
     data: _Data = field(repr=False)
     steps: list[Comparison] = field(default_factory=list, repr=False)  # after each addition
+    verdict: str = "explained"           # see rotor_env.diagnosis.verdict
+    rms_ratio_after: float = math.nan     # final residual RMS / noise floor
+    rms_ratio_before: float = math.nan
+    unexplained: dict | None = None       # orders and bands of a residual above the floor
+    rejected: list[dict] = field(default_factory=list)  # {effect, rule} for every candidate turned down
+    ip_estimate: float = math.nan         # the inertia ratio the gyroscopic moment gives
+    ip_standard_error: float = math.nan
+    time_scale: float = 1.0               # t_model = time_scale * t_file
+    notes: list[str] = field(default_factory=list)
 
     @property
     def candidates(self) -> list[Candidate]:
         return self.rounds[0] if self.rounds else []
 
     def add(self, *names: str) -> Comparison:
-        """The final model with more effects, compared (one call to add an effect)."""
+        """The final model with more effects, compared (one call to add an effect); its
+        standard errors and tests are the HAC ones, as the diagnosis reports them."""
         model = Model(self.model).add(*names).effects
-        return compare(self.data, model, _known(model), self.after.onsets, self.after.splits)
+        return compare(self.data, model, _known(model), self.after.onsets, self.after.splits, robust=True,
+                       alpha=self.alpha)
 
     # -------------------------------------------------------------- text/JSON
     def to_dict(self) -> dict:
@@ -75,6 +137,17 @@ class Diagnosis(DiagnosisFigures):
             "significance": self.after.significance,
             "failing_windows": self.windows,
             "noise_floor": self.noise_floor,
+            "verdict": self.verdict,
+            "rms_ratio_before": self.rms_ratio_before,
+            "rms_ratio_after": self.rms_ratio_after,
+            "unexplained": self.unexplained,
+            "rejected": self.rejected,
+            "ip_estimate": self.ip_estimate,
+            "ip_standard_error": self.ip_standard_error,
+            "time_scale": self.time_scale,
+            "prefilter_cutoff": self.data.cutoff,
+            "standard_errors_kind": "HAC (Newey-West, Bartlett kernel, Andrews bandwidth)",
+            "notes": self.notes,
         }
 
     def to_json(self, **kwargs) -> str:
@@ -90,7 +163,7 @@ class Diagnosis(DiagnosisFigures):
             f"  residual above the noise floor ({self.noise_floor:.3g}) in {len(self.windows)} window(s)"
             + (": " + ", ".join(f"{w['t_start']:.0f}–{w['t_end']:.0f}" for w in self.windows[:6]) if self.windows else ""),
             "",
-            "candidates (partial F of adding each to the starting model):",
+            "candidates (HAC Wald test of each added to the starting model):",
             f"  {'effect':<22}{'F':>12}{'log10 p':>11}{'RMS after':>11}{'fit % after':>12}  verdict",
         ]
         for c in self.candidates:
@@ -111,8 +184,23 @@ class Diagnosis(DiagnosisFigures):
                     note = f"  (appears at t ≈ {on:.0f})" if on is not None else "  (present throughout)"
                 lines.append(f"  + {e}{note}")
                 lines.append(f"      {EFFECTS[e].cause}")
-        else:
-            lines.append("no missing effect: the model explains the data (to the practical-relevance rule)")
+        if self.rejected:
+            lines.append("candidates turned down:")
+            lines += [f"  - {r['effect']}: {r['rule']}" for r in self.rejected]
+        lines.append("")
+        lines.append(f"VERDICT: {self.verdict} — " + VERDICT_TEXT[self.verdict].format(
+            ratio=self.rms_ratio_after, floor=self.noise_floor))
+        if self.unexplained:
+            if self.unexplained["orders"]:
+                lines.append("  what is left, by rotation order (share of the energy above the noise):")
+                lines += [f"    {o['order']}x {o['direction']}: {100 * o['share']:.0f} %"
+                          for o in self.unexplained["orders"]]
+            for w in self.unexplained["bands"][:4]:
+                lines.append(f"    stands out at t {w['t_start']:.0f}–{w['t_end']:.0f}, speed "
+                             f"{w.get('speed_min', math.nan):.3g}–{w.get('speed_max', math.nan):.3g} "
+                             f"(up to {w['peak_rms_over_floor']:.1f}x the floor)")
+        for n in self.notes:
+            lines.append(f"note: {n}")
         lines += [
             "",
             f"final model: {', '.join(self.model)}",
@@ -121,7 +209,8 @@ class Diagnosis(DiagnosisFigures):
             "  coefficients:",
         ]
         for c, v, s in zip(a.columns, a.coefficients, a.standard_errors, strict=True):
-            lines.append(f"    {c:<14}{v: .5g} ± {s:.2g}")
+            lines.append(f"    {c:<14}{v: .5g} ± {1.96 * s:.2g}")
+        lines.append("  (± : 95 % intervals from HAC standard errors, valid on an autocorrelated residual)")
         return "\n".join(lines)
 
 

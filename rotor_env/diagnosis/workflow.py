@@ -2,15 +2,29 @@
 
 from __future__ import annotations
 
+import math
+import warnings
 from collections.abc import Sequence
 
 from ..effects import EFFECTS, get_effect
 from ..measurements import Measurements
 from .candidates import Candidate, _appears_or_changes, _change_time, _rank
-from .compare import Comparison, _Data, _known, compare
+from .checks import check_candidate
+from .compare import Comparison, _Data, _known, compare, make_robust
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES, Model, _as_model, _validate_columns
 from .orders import _first_rows, failing_windows
-from .result import Diagnosis
+from .result import Diagnosis, NotIdentifiableResult
+from .scaling import (
+    K_RANGE,
+    NotIdentifiable,
+    check_excitation,
+    estimate_ip_and_stiffness,
+    rescale_time,
+)
+from .verdict import describe_unexplained, estimate_noise_floor, verdict_of
+
+#: a given ip further than this (and 5 standard errors) from the data's estimate is contradicted
+IP_TOLERANCE = 0.03
 
 
 # ------------------------------------------------------------------ entry points
@@ -22,13 +36,15 @@ def fit(
     equation: str = "both",
     window_fraction: float = 0.1,
     t_start: float | None = None,
+    alpha: float = 0.05,
 ) -> Comparison:
-    """Fit one model and compare it with the measurements (no search)."""
+    """Fit one model and compare it with the measurements (no search; HAC standard
+    errors and effect tests, as :func:`diagnose` reports them)."""
     model = _as_model(model)
     data = _Data(measurements, ip, equation, window_fraction, t_start)
     for e in model:
         _validate_columns(EFFECTS[e], data.data, ip)
-    return compare(data, model.effects, _known(model.effects))
+    return compare(data, model.effects, _known(model.effects), robust=True, alpha=alpha)
 
 
 def diagnose(
@@ -36,7 +52,7 @@ def diagnose(
     model: Sequence[str] | Model | str = DEFAULT_MODEL,
     *,
     candidates: Sequence[str] | None = None,
-    ip: float = 0.3,
+    ip: float | None = None,
     alpha: float = 0.05,
     equation: str = "both",
     min_fit_gain: float = 2.0,
@@ -45,15 +61,19 @@ def diagnose(
     t_start: float | None = None,
     max_rounds: int = 6,
     progress: bool = False,
-) -> Diagnosis:
-    """Compare ``model`` with the measurements, rank and add the missing effects.
+) -> Diagnosis | NotIdentifiableResult:
+    """Compare ``model`` with the measurements, rank and add the missing effects, judge.
 
-    See the module docstring for the rules.  ``candidates`` defaults to every library
+    See the package docstring for the rules.  ``candidates`` defaults to every library
     effect not in the model (user effects registered with ``--effect`` are added by
-    the caller).
+    the caller).  ``ip=None`` estimates the inertia ratio from the data; a given one
+    that the data contradict is kept, with a warning.  A record that cannot decide
+    anything returns a :class:`NotIdentifiableResult` (verdict ``not_identifiable``).
     """
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha!r}")
+    if ip is not None and not (math.isfinite(ip) and 0 <= ip < 1):
+        raise ValueError(f"ip must be a number in [0, 1), got {float(ip)!r}")
     model = _as_model(model)
     if candidates is None:
         candidates = [c for c in LIBRARY_CANDIDATES if c not in model]
@@ -61,9 +81,50 @@ def diagnose(
         candidates = [get_effect(c).name for c in candidates if c not in model]
     if "unbalance_in_phase" in model:
         candidates = [c for c in candidates if c != "unbalance"]
-    data = _Data(measurements, ip, equation, window_fraction, t_start)
+    notes: list[str] = []
+    try:
+        check_excitation(measurements)
+        k_hat = estimate_ip_and_stiffness(measurements, model.effects).k
+        time_scale = 1.0
+        if math.isfinite(k_hat) and not (K_RANGE[0] <= k_hat <= K_RANGE[1]):
+            if k_hat <= 0:
+                raise NotIdentifiable(f"the data give a negative stiffness ({k_hat:.3g}): "
+                                      "check the sign conventions of the angles and their rates")
+            time_scale = math.sqrt(k_hat)
+            measurements = rescale_time(measurements, k_hat)
+            notes.append(f"time rescaled by {time_scale:.6g}: the data's natural frequency is "
+                         f"{time_scale:.4g} per time unit of the file, the model's is 1")
+        # the window and prefilter do not depend on ip: read ip on the data every fit uses
+        data = _Data(measurements, 0.3 if ip is None else float(ip), equation, window_fraction, t_start)
+        check_excitation(data.raw)
+        est = estimate_ip_and_stiffness(data.data, model.effects, data.raw_data, data.noise_gain)
+        ip_hat, ip_se = est.ip, est.standard_error
+        if not math.isfinite(ip_hat):
+            raise NotIdentifiable("the gyroscopic moment is not excited (no speed or no rates)")
+        ip_est = float(min(max(ip_hat, 0.0), 0.95))
+        if ip is None:
+            ip_used = ip_est
+            notes.append(f"ip estimated from the data: {ip_hat:.4f} ± {1.96 * ip_se:.2g} (95 %)"
+                         + ("" if est.trusted else
+                            f"; uncertain: the widest library model leaves {est.rms_ratio:.1f}x the noise "
+                            "floor, so something outside the library biases it"))
+        else:
+            ip_used = float(ip)
+            contradicted = abs(ip - ip_hat) > max(IP_TOLERANCE, 5.0 * ip_se)
+            if contradicted and est.trusted:
+                msg = (f"the data contradict ip = {ip:g}: the gyroscopic moment gives ip = {ip_hat:.4f} "
+                       f"± {1.96 * ip_se:.2g}; a wrong ip shows up as a false stiffness change")
+                warnings.warn(msg, stacklevel=2)
+                notes.append("WARNING: " + msg)
+            elif contradicted:
+                notes.append(f"ip = {ip:g} not checked: the data give {ip_hat:.4f}, but the widest library "
+                             f"model leaves {est.rms_ratio:.1f}x the noise floor (a fault outside the "
+                             "library biases that estimate)")
+        data.ip = ip_used
+    except NotIdentifiable as exc:
+        return NotIdentifiableResult(source=measurements.source, reason=str(exc), ip=ip, notes=notes)
     for e in (*model, *candidates):
-        _validate_columns(EFFECTS[e], data.data, ip)
+        _validate_columns(EFFECTS[e], data.data, ip_used)
     pbar = None
     if progress:
         from tqdm.auto import tqdm
@@ -71,8 +132,7 @@ def diagnose(
         pbar = tqdm(total=max_rounds, desc="diagnosing", unit="round", leave=False)
     current = compare(data, model.effects, _known(model.effects))
     before = current
-    # the first equation's rows: one residual per sample, white where the model is right
-    windows, floor = failing_windows(data.meas.t, _first_rows(before.residual, equation))
+    floor = estimate_noise_floor(data, before)
     rounds: list[list[Candidate]] = []
     missing: list[str] = []
     steps: list[Comparison] = []
@@ -82,8 +142,8 @@ def diagnose(
         rounds.append(ranked)
         if pbar is not None:
             pbar.update(1)
-        chosen = next((c for c in ranked if c.significant and c.relevant), None)
-        if chosen is None or not ranked[0].significant:
+        chosen = _choose(data, current, ranked, floor, alpha)
+        if chosen is None:
             break
         missing.append(chosen.effect)
         current = chosen.comparison
@@ -99,9 +159,46 @@ def diagnose(
         else _change_time(data, current, e, _known(current.model), alpha, min_energy_drop)
         for e in missing
     }
-    diag = Diagnosis(
-        source=measurements.source, ip=ip, alpha=alpha, equation=equation, t_start=data.t_start,
+    for comp in {id(c): c for c in (before, *steps, current)}.values():
+        make_robust(data, comp, alpha)
+    floor = estimate_noise_floor(data, current)
+    # the first equation's rows: one residual per sample, white where the model is right
+    windows, _ = failing_windows(data.meas.t, _first_rows(before.residual, equation), floor=floor,
+                                 speed=data.meas.phi_dot)
+    ratio = current.rms / floor if floor > 0 else math.inf
+    verdict = verdict_of(bool(missing), ratio)
+    rejected: dict[str, str] = {}
+    for r in rounds:
+        for c in r:
+            if c.rejected_by is not None and c.effect not in missing:
+                rejected[c.effect] = c.rejected_by
+    return Diagnosis(
+        source=measurements.source, ip=ip_used, alpha=alpha, equation=equation, t_start=data.t_start,
         start_model=model.effects, model=current.model, missing=missing, onset=onset, rounds=rounds,
         before=before, after=current, windows=windows, noise_floor=floor, data=data, steps=steps,
+        verdict=verdict, rms_ratio_after=ratio, rms_ratio_before=before.rms / floor if floor > 0 else math.inf,
+        unexplained=describe_unexplained(data, current, floor) if verdict in ("partly_explained", "unexplained")
+        else None,
+        rejected=[{"effect": e, "rule": rule} for e, rule in rejected.items()],
+        ip_estimate=ip_hat, ip_standard_error=ip_se, time_scale=time_scale, notes=notes,
     )
-    return diag
+
+
+def _choose(data, base: Comparison, ranked: list[Candidate], floor: float, alpha: float) -> Candidate | None:
+    """The best candidate that is significant, relevant and passes the physics checks."""
+    n = max(1, len(ranked))
+    for c in ranked:
+        if not c.significant:
+            c.rejected_by = (f"not significant: HAC Wald test log10 p = {c.log10_p:.3g} "
+                             f"(needs < {math.log10(alpha / n):.3g})")
+            continue
+        if not c.relevant:
+            c.rejected_by = (f"not relevant: removes {100 * c.energy_drop:.1f} % of the equation error, "
+                             f"free-run fit {c.fit_gain:+.1f} points")
+            continue
+        rule, evidence = check_candidate(data, base, c, floor, tuple(r.effect for r in ranked))
+        c.checks = evidence
+        if rule is None:
+            return c
+        c.rejected_by = rule
+    return None
