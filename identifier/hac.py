@@ -45,6 +45,7 @@ __all__ = [
     "hac_covariance",
     "long_run_covariance",
     "score_test",
+    "time_scores",
     "wald_group_test",
     "wald_test",
 ]
@@ -100,10 +101,32 @@ def long_run_covariance(u: np.ndarray, bandwidth: int | None = None) -> np.ndarr
     return S
 
 
-def hac_covariance(X: np.ndarray, resid: np.ndarray, bandwidth: int | None = None) -> np.ndarray:
-    """Sandwich covariance ``(X'X)^-1 S (X'X)^-1`` of least-squares coefficients."""
+def time_scores(u: np.ndarray, rows_per_time: int = 1) -> np.ndarray:
+    """Score rows summed per time step.
+
+    A regression with several equations per sample (``rows_per_time`` consecutive
+    rows) is a time series of *samples*, not of rows: interleaved, the rows of two
+    nearly independent equations would look uncorrelated at lag 1 and the bandwidth
+    rule would pick a tiny lag window, blind to the correlation over time.  The sum
+    ``sum_t u_t`` is the same either way.
+    """
+    u = np.asarray(u, dtype=float)
+    if u.ndim == 1:
+        u = u[:, None]
+    g = int(rows_per_time)
+    if g <= 1:
+        return u
+    if u.shape[0] % g:
+        raise ValueError(f"{u.shape[0]} rows are not a whole number of {g}-row samples")
+    return u.reshape(-1, g, u.shape[1]).sum(axis=1)
+
+
+def hac_covariance(X: np.ndarray, resid: np.ndarray, bandwidth: int | None = None,
+                   rows_per_time: int = 1) -> np.ndarray:
+    """Sandwich covariance ``(X'X)^-1 S (X'X)^-1`` of least-squares coefficients
+    (``rows_per_time``: equations per sample, see :func:`time_scores`)."""
     X = np.asarray(X, dtype=float)
-    u = X * np.asarray(resid, dtype=float)[:, None]
+    u = time_scores(X * np.asarray(resid, dtype=float)[:, None], rows_per_time)
     S = long_run_covariance(u, bandwidth)
     Xi = np.linalg.pinv(X.T @ X)
     return Xi @ S @ Xi
@@ -131,7 +154,7 @@ def wald_test(theta: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
 
 
 def wald_group_test(X: np.ndarray, resid: np.ndarray, theta_group: np.ndarray, group,
-                    bandwidth: int | None = None) -> tuple[float, float]:
+                    bandwidth: int | None = None, rows_per_time: int = 1) -> tuple[float, float]:
     """HAC Wald test ``(F, log10 p)`` that the coefficients ``theta_group`` of columns
     ``group`` (indices) of the least-squares fit ``X`` with residual ``resid`` are zero.
 
@@ -141,11 +164,12 @@ def wald_group_test(X: np.ndarray, resid: np.ndarray, theta_group: np.ndarray, g
     """
     X = np.asarray(X, dtype=float)
     A = np.linalg.pinv(X.T @ X)[list(group)]
-    u = (X @ A.T) * np.asarray(resid, dtype=float)[:, None]
+    u = time_scores((X @ A.T) * np.asarray(resid, dtype=float)[:, None], rows_per_time)
     return wald_test(theta_group, long_run_covariance(u, bandwidth))
 
 
-def score_test(X: np.ndarray, Z: np.ndarray, resid: np.ndarray, bandwidth: int | None = None) -> tuple[float, float]:
+def score_test(X: np.ndarray, Z: np.ndarray, resid: np.ndarray, bandwidth: int | None = None,
+               rows_per_time: int = 1) -> tuple[float, float]:
     """HAC score (LM) test of adding columns ``Z`` to the model ``X`` with residual ``resid``.
 
     Returns ``(F, log10 p)`` with ``F = LM/q``.  Columns of ``Z`` that lie in the span
@@ -162,7 +186,7 @@ def score_test(X: np.ndarray, Z: np.ndarray, resid: np.ndarray, bandwidth: int |
         Zt = Z
     e = np.asarray(resid, dtype=float)
     s = Zt.T @ e
-    S = long_run_covariance(Zt * e[:, None], bandwidth)
+    S = long_run_covariance(time_scores(Zt * e[:, None], rows_per_time), bandwidth)
     # rank of the new directions: those not in X's span (relative to Z's own size)
     sv = np.linalg.svd(Zt, compute_uv=False)
     scale = np.linalg.norm(Z, axis=0).max() if Z.size else 0.0

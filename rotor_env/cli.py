@@ -300,6 +300,9 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         "fit_bands": comp.fit_bands,
         "significance": {k: {kk: v[kk] for kk in ("F", "log10_p", "significant", "testable")}
                          for k, v in comp.significance.items()},
+        "standard_errors_kind": "HAC (Newey-West, Bartlett kernel, Andrews bandwidth)",
+        "errors_in_variables_bias": (None if comp.eiv_bias is None else
+                                     dict(zip(comp.columns, map(float, comp.eiv_bias), strict=True))),
     }
     if args.json:
         print(json.dumps(_jsonable(out)))
@@ -307,7 +310,9 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     print(f"model: {', '.join(comp.model)}")
     print(f"equation error RMS {comp.rms:.4g}, R^2 {comp.r2:.5f}; free-run fit {comp.fit_percent:.1f} %")
     for c, v, se in zip(comp.columns, comp.coefficients, comp.standard_errors, strict=True):
-        print(f"  {c:<14}{v: .6g} ± {se:.2g}")
+        print(f"  {c:<14}{v: .6g} ± {1.96 * se:.2g}")
+    print("  (± : 95 % intervals from HAC standard errors; values corrected for the sensor noise in the "
+          "regressors)" if comp.eiv_bias is not None else "  (± : 95 % intervals from HAC standard errors)")
     print("effects tested last:")
     for k, v in comp.significance.items():
         verdict = "significant" if v["significant"] else ("not testable" if not v["testable"] else "not significant")
@@ -326,7 +331,12 @@ def _add_diagnose_parsers(sub) -> None:
         p.add_argument("--model", metavar="A,B,...",
                        help="comma-separated effects" + (" (default: unbalance,viscous_damping)" if cmd == "diagnose" else ""),
                        required=cmd == "fit")
-        p.add_argument("--ip", type=float, default=0.3, help="inertia ratio I_p/I_t (default 0.3)")
+        if cmd == "diagnose":
+            p.add_argument("--ip", type=float, default=None,
+                           help="inertia ratio I_p/I_t (default: estimated from the data; a given one the "
+                           "data contradict is kept, with a warning)")
+        else:
+            p.add_argument("--ip", type=float, default=0.3, help="inertia ratio I_p/I_t (default 0.3)")
         p.add_argument("--effect", action="append", metavar="MODULE:NAME",
                        help="a user effect: a column function or an Effect (repeatable)")
         p.add_argument("--json", action="store_true", help="print the result as one JSON object")

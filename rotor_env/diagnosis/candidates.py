@@ -135,14 +135,14 @@ def _candidate_columns(data: _Data, name: str, onset: float | None) -> np.ndarra
 def _wald(data: _Data, comp: Comparison, name: str, known: dict, null=None) -> tuple[float, float]:
     """HAC Wald test of ``name``'s coefficients in the fitted model ``comp`` against ``null``
     (0, or the value the base model assumed for it — the stiffness scale 1)."""
-    _, X, _, _, columns, groups = _design(data, comp.model, known, comp.onsets, comp.splits)
+    spec, X, _, _, columns, groups = _design(data, comp.model, known, comp.onsets, comp.splits)
     keep = np.flatnonzero(np.linalg.norm(X, axis=0) > 0)
     group = [c for c in (columns.index(c) for c in groups[name]) if c in set(keep.tolist())]
     if not group:
         return 0.0, 0.0
     pos = [keep.tolist().index(g) for g in group]
     theta = comp.coefficients[group] - (0.0 if null is None else np.asarray(null, dtype=float)[:len(group)])
-    return wald_group_test(X[:, keep], comp.residual, theta, pos)
+    return wald_group_test(X[:, keep], comp.residual, theta, pos, rows_per_time=spec.rows_per_sample)
 
 
 def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict, alpha: float,

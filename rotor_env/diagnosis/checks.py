@@ -138,7 +138,7 @@ def _window_estimates(data: _Data, comp: Comparison, effect: str, start: float |
             continue
         Xk = Xw[:, keep]
         theta, *_ = np.linalg.lstsq(Xk, yw, rcond=None)
-        cov = hac_covariance(Xk, yw - Xk @ theta)
+        cov = hac_covariance(Xk, yw - Xk @ theta, rows_per_time=spec.rows_per_sample)
         pos = [keep.tolist().index(i) for i in idx]
         out.append((float(a), float(b), theta[pos], cov[np.ix_(pos, pos)]))
     return out

@@ -44,6 +44,8 @@ class Comparison:
     simulated: Measurements | None = field(repr=False, default=None)
     diverged: bool = False
     covariance: np.ndarray | None = field(repr=False, default=None)  # HAC, when robust
+    #: errors-in-variables bias removed from the coefficients (naive minus corrected; None: not corrected)
+    eiv_bias: np.ndarray | None = field(repr=False, default=None)
 
     @property
     def fit_percent(self) -> float:
@@ -154,9 +156,14 @@ class _Data:
         noisy = _white_level(meas.theta_x) + _white_level(meas.theta_y) > NOISE_DETECTION * float(amp.max())
         self.cutoff = prefilter_cutoff(meas.phi_dot, dt) if prefilter and noisy and len(meas) > 60 else None
         self.noise_gain = 1.0
+        self.sos = None
+        # each inclination channel's white-noise level (the errors-in-variables correction adds more)
+        self.channel_noise = np.array([_white_level(meas.data[:, j]) for j in range(4, 10)]) if noisy else None
+        self.window_start = int(np.argmax(meas.t >= t_start))
         filtered = meas
         if self.cutoff is not None:
             sos = butter(4, self.cutoff, fs=1.0 / dt, output="sos")
+            self.sos = sos
             out = meas.data.copy()
             out[:, 4:] = sosfiltfilt(sos, out[:, 4:], axis=0)  # the six inclination channels
             filtered = Measurements(out, meas.source)
@@ -196,6 +203,22 @@ def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, fl
     return spec, X, y, t_rows, tuple(columns), groups
 
 
+def _physical_values(spec: RegressionSpec, columns: Sequence[str], coef: np.ndarray,
+                     splits: Sequence[str]) -> tuple[dict[str, float], dict[str, float]]:
+    """Physical parameters of the coefficients, and (for split effects) their values before."""
+    n = spec.n_columns
+    physical = spec.physical(coef[:n])
+    physical_before: dict[str, float] = {}
+    if splits:
+        theta_b = coef[:n].copy()
+        for e in splits:
+            for c in spec.groups[e]:
+                theta_b[spec.columns.index(c)] = coef[list(columns).index(f"{c}_before")]
+        pb = spec.physical(theta_b)
+        physical_before = {p.name: pb[p.name] for e in splits for p in EFFECTS[e].parameters}
+    return physical, physical_before
+
+
 def compare(
     data: _Data,
     model: Sequence[str],
@@ -221,16 +244,7 @@ def compare(
     resid = y - X @ coef
     J = float(resid @ resid)
     tss = float(np.sum((y - y.mean()) ** 2))
-    n = spec.n_columns
-    physical = spec.physical(coef[:n])
-    physical_before: dict[str, float] = {}
-    if splits:
-        theta_b = coef[:n].copy()
-        for e in splits:
-            for c in spec.groups[e]:
-                theta_b[spec.columns.index(c)] = coef[columns.index(f"{c}_before")]
-        pb = spec.physical(theta_b)
-        physical_before = {p.name: pb[p.name] for e in splits for p in EFFECTS[e].parameters}
+    physical, physical_before = _physical_values(spec, columns, coef, splits)
     sig = est.effect_tests().to_dict()
     comp = Comparison(
         model=tuple(model), columns=columns, coefficients=coef, standard_errors=est.standard_errors(),
@@ -240,7 +254,7 @@ def compare(
         physical_before=physical_before,
     )
     if robust:
-        _robust_statistics(comp, X, groups, alpha)
+        _robust_statistics(comp, X, groups, alpha, spec.rows_per_sample)
     if simulate:
         _free_run(comp, data, spec.known)
     return comp
@@ -248,19 +262,19 @@ def compare(
 
 def make_robust(data: _Data, comp: Comparison, alpha: float = 0.05) -> Comparison:
     """Replace ``comp``'s standard errors and effect tests by the HAC ones (in place)."""
-    _, X, _, _, _, groups = _design(data, comp.model, _known(comp.model), comp.onsets, comp.splits)
-    _robust_statistics(comp, X, groups, alpha)
+    spec, X, _, _, _, groups = _design(data, comp.model, _known(comp.model), comp.onsets, comp.splits)
+    _robust_statistics(comp, X, groups, alpha, spec.rows_per_sample)
     return comp
 
 
 def _robust_statistics(comp: Comparison, X: np.ndarray, groups: dict[str, tuple[str, ...]],
-                       alpha: float = 0.05) -> None:
+                       alpha: float = 0.05, rows_per_time: int = 1) -> None:
     """HAC standard errors and effect-last Wald tests (see :mod:`identifier.hac`)."""
     cols = list(comp.columns)
     keep = np.flatnonzero(np.linalg.norm(X, axis=0) > 0)  # columns zero throughout: no estimate
     cov = np.zeros((len(cols), len(cols)))
     if keep.size:
-        cov[np.ix_(keep, keep)] = hac_covariance(X[:, keep], comp.residual)
+        cov[np.ix_(keep, keep)] = hac_covariance(X[:, keep], comp.residual, rows_per_time=rows_per_time)
     comp.covariance = cov
     comp.standard_errors = np.sqrt(np.maximum(np.diag(cov), 0.0))
     sig = {}

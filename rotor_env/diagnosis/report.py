@@ -159,6 +159,69 @@ class DiagnosisFigures:
             plt.close(fig)
         return paths
 
+    def _verdict_html(self) -> str:
+        """The verdict section of the report: the word, its sentence, the residual over the
+        noise floor, what is left (order lines, bands), the candidates turned down, the notes.
+
+        Every string from data or user input (effect names, rules, notes) is escaped.
+        """
+        from .result import VERDICT_TEXT  # result imports this module
+
+        verdict = str(self.verdict)
+        template = VERDICT_TEXT.get(verdict)
+        sentence = template.format(ratio=self.rms_ratio_after, floor=self.noise_floor) if template else ""
+        parts = [
+            f"<section id='verdict' class='verdict verdict-{_e(verdict)}'>",
+            "<h2>Verdict</h2>",
+            f"<p class='verdict-word'>{_e(verdict)}</p>",
+            f"<p class='verdict-text'>{_e(sentence)}</p>",
+            f"<p class='verdict-ratio'>Final residual RMS: <b>{_num(self.rms_ratio_after, '.3g')}&times;</b> the "
+            f"noise floor ({_num(self.noise_floor, '.3g')}); starting model: "
+            f"{_num(self.rms_ratio_before, '.3g')}&times;.</p>",
+        ]
+        if math.isfinite(self.ip_estimate):
+            se = (f" &plusmn; {_num(1.96 * self.ip_standard_error, '.2g')} (95 %)"
+                  if math.isfinite(self.ip_standard_error) else "")
+            parts.append(f"<p>Inertia ratio ip = {_num(self.ip, 'g')}; the gyroscopic moment in the data gives "
+                         f"{_num(self.ip_estimate, '.4f')}{se}.</p>")
+        left = self.unexplained or {}
+        if verdict in ("partly_explained", "unexplained") or left:
+            orders = left.get("orders") or []
+            parts.append("<h3>What is left, by rotation order</h3>")
+            if orders:
+                rows = "".join(
+                    f"<tr><td>{_e(_order(o.get('order')))}</td><td>{_e(o.get('direction', ''))}</td>"
+                    f"<td>{_num(100 * o.get('share', math.nan), '.0f')} %</td></tr>"
+                    for o in orders
+                )
+                parts.append("<table class='orders'><tr><th>order</th><th>whirl</th>"
+                             f"<th>share of the energy above the noise</th></tr>{rows}</table>")
+            else:
+                parts.append("<p>No single rotation-order line stands out.</p>")
+            bands = left.get("bands") or []
+            parts.append("<h3>Where the residual stands out</h3>")
+            if bands:
+                rows = "".join(
+                    f"<tr><td>{_num(w.get('t_start'), '.0f')}&ndash;{_num(w.get('t_end'), '.0f')}</td>"
+                    f"<td>{_num(w.get('speed_min'), '.3g')}&ndash;{_num(w.get('speed_max'), '.3g')}</td>"
+                    f"<td>{_num(w.get('peak_rms_over_floor'), '.1f')}&times;</td></tr>"
+                    for w in bands
+                )
+                parts.append("<table class='bands'><tr><th>t</th><th>speed</th><th>peak RMS / floor</th></tr>"
+                             f"{rows}</table>")
+            else:
+                parts.append("<p>No band of time stands above the floor.</p>")
+        rows = "".join(
+            f"<tr><td>{_e(r.get('effect', ''))}</td><td>{_e(r.get('rule', ''))}</td></tr>" for r in self.rejected
+        ) or "<tr><td colspan=2>none</td></tr>"
+        parts.append("<h3>Candidates turned down</h3>"
+                     f"<table class='rejected'><tr><th>effect</th><th>rule that rejected it</th></tr>{rows}</table>")
+        if self.notes:
+            items = "".join(f"<li>{_e(n)}</li>" for n in self.notes)
+            parts.append(f"<h3>Notes</h3><ul class='notes'>{items}</ul>")
+        parts.append("</section>")
+        return "\n".join(parts)
+
     def report(self, path: str | Path, *, overwrite: bool = False) -> Path:
         """A self-contained HTML report (figures embedded as PNG)."""
         import matplotlib.pyplot as plt
@@ -175,7 +238,7 @@ class DiagnosisFigures:
             return f'<img alt="{name}" src="data:image/png;base64,{imgs[name]}">'
 
         cand_rows = "".join(
-            f"<tr class='{'missing' if c.effect in self.missing else ''}'><td>{c.effect}</td><td>{c.F:.4g}</td>"
+            f"<tr class='{'missing' if c.effect in self.missing else ''}'><td>{_e(c.effect)}</td><td>{c.F:.4g}</td>"
             f"<td>{c.log10_p:.4g}</td><td>{c.rms_after:.4g}</td><td>{c.fit_percent_after:.1f}</td>"
             f"<td>{c.correlation:.2f}</td><td>{c.order_overlap:.2f}</td><td>{html.escape(c.story)}</td></tr>"
             for c in self.candidates
@@ -184,23 +247,35 @@ class DiagnosisFigures:
             f"<tr><td>{w['t_start']:.1f}</td><td>{w['t_end']:.1f}</td><td>{w['peak_rms_over_floor']:.1f}</td></tr>"
             for w in self.windows
         ) or "<tr><td colspan=3>none</td></tr>"
+        bias = self.after.eiv_bias
         coef_rows = "".join(
-            f"<tr><td>{c}</td><td>{v:.5g}</td><td>{s:.2g}</td></tr>"
-            for c, v, s in zip(self.after.columns, self.after.coefficients, self.after.standard_errors, strict=True)
+            f"<tr><td>{_e(c)}</td><td>{v:.5g}</td><td>{s:.2g}</td>"
+            + (f"<td>{bias[j]:+.2g}</td>" if bias is not None else "") + "</tr>"
+            for j, (c, v, s) in enumerate(
+                zip(self.after.columns, self.after.coefficients, self.after.standard_errors, strict=True))
         )
+        coef_head = ("<tr><th>coefficient</th><th>estimate</th><th>std. error</th>"
+                     + ("<th>noise (errors-in-variables) bias removed</th>" if bias is not None else "") + "</tr>")
         missing = ", ".join(
-            f"<b>{e}</b>" + (f" (from t ≈ {self.onset[e]:.0f})" if self.onset.get(e) is not None else "")
+            f"<b>{_e(e)}</b>" + (f" (from t ≈ {self.onset[e]:.0f})" if self.onset.get(e) is not None else "")
             for e in self.missing
         ) or "none"
         doc = f"""<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">
 <title>rotor-id diagnosis</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:auto;padding:1em;color:#222}}
 table{{border-collapse:collapse;margin:.5em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;font-size:13px}}
-tr.missing{{background:#fde0dc}}img{{max-width:100%}}pre{{background:#f4f4f4;padding:.5em}}</style></head><body>
+tr.missing{{background:#fde0dc}}
+section.verdict{{border:2px solid #888;border-radius:6px;padding:.3em 1em;margin:1em 0}}
+p.verdict-word{{font-size:2em;font-weight:bold;margin:.2em 0}}
+.verdict-explained,.verdict-explained_after_adding{{border-color:#2a8a3a!important}}
+.verdict-partly_explained{{border-color:#d98a00!important}}.verdict-unexplained{{border-color:#c0392b!important}}
+.verdict-explained p.verdict-word,.verdict-explained_after_adding p.verdict-word{{color:#2a8a3a}}
+.verdict-partly_explained p.verdict-word{{color:#d98a00}}.verdict-unexplained p.verdict-word{{color:#c0392b}}img{{max-width:100%}}pre{{background:#f4f4f4;padding:.5em}}</style></head><body>
 <h1>rotor-id diagnosis</h1>
+{self._verdict_html()}
 <h2>Summary</h2>
 <p>Data: {html.escape(str(self.source))}; ip = {self.ip:g}; alpha = {self.alpha:g}; informative window t &ge; {self.t_start:g}.</p>
-<p>Starting model: {', '.join(self.start_model)}. Missing: {missing}. Final model: {', '.join(self.model)}.</p>
+<p>Starting model: {_e(', '.join(self.start_model))}. Missing: {missing}. Final model: {_e(', '.join(self.model))}.</p>
 <table><tr><th></th><th>equation RMS</th><th>R²</th><th>free-run fit %</th></tr>
 <tr><td>before</td><td>{self.before.rms:.4g}</td><td>{self.before.r2:.4f}</td><td>{self.before.fit_percent:.1f}</td></tr>
 <tr><td>after</td><td>{self.after.rms:.4g}</td><td>{self.after.r2:.4f}</td><td>{self.after.fit_percent:.1f}</td></tr></table>
@@ -211,7 +286,28 @@ tr.missing{{background:#fde0dc}}img{{max-width:100%}}pre{{background:#f4f4f4;pad
 <h2>Which effect is missing</h2>{img('candidates')}
 <table><tr><th>effect</th><th>F</th><th>log10 p</th><th>RMS after</th><th>fit % after</th><th>corr.</th><th>order overlap</th><th>physical story</th></tr>{cand_rows}</table>
 <h2>Before and after</h2>{img('before_after')}
-<table><tr><th>coefficient</th><th>estimate</th><th>std. error</th></tr>{coef_rows}</table>
+<table class='coefficients'>{coef_head}{coef_rows}</table>
 <pre>{html.escape(self.summary())}</pre>
 </body></html>"""
         return atomic_write_text(path, doc, overwrite=overwrite)
+
+
+def _e(x) -> str:
+    """``x`` as text, HTML-escaped (quotes too): for every string from data or user input."""
+    return html.escape(str(x))
+
+
+def _num(x, fmt: str) -> str:
+    """A number formatted with ``fmt``; ``-`` where there is none (None, not a number)."""
+    try:
+        return format(float(x), fmt)
+    except (TypeError, ValueError):
+        return "-"
+
+
+def _order(o) -> str:
+    """A rotation order as the report writes it: ``1x``, ``1.5x``."""
+    try:
+        return f"{float(o):g}x"
+    except (TypeError, ValueError):
+        return f"{o}x"

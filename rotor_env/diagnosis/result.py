@@ -147,6 +147,8 @@ class Diagnosis(DiagnosisFigures):
             "time_scale": self.time_scale,
             "prefilter_cutoff": self.data.cutoff,
             "standard_errors_kind": "HAC (Newey-West, Bartlett kernel, Andrews bandwidth)",
+            "errors_in_variables_bias": (None if self.after.eiv_bias is None else dict(
+                zip(self.after.columns, map(float, self.after.eiv_bias), strict=True))),
             "notes": self.notes,
         }
 
@@ -208,9 +210,13 @@ class Diagnosis(DiagnosisFigures):
             f"  free-run fit {a.fit_percent:.1f} % (was {b.fit_percent:.1f} %)",
             "  coefficients:",
         ]
-        for c, v, s in zip(a.columns, a.coefficients, a.standard_errors, strict=True):
-            lines.append(f"    {c:<14}{v: .5g} ± {1.96 * s:.2g}")
-        lines.append("  (± : 95 % intervals from HAC standard errors, valid on an autocorrelated residual)")
+        bias = a.eiv_bias if a.eiv_bias is not None else np.zeros(len(a.columns))
+        for c, v, s, d in zip(a.columns, a.coefficients, a.standard_errors, bias, strict=True):
+            lines.append(f"    {c:<14}{v: .5g} ± {1.96 * s:.2g}"
+                         + (f"   (noise bias {d:+.2g} removed)" if abs(d) >= 0.05 * s else ""))
+        lines.append("  (± : 95 % intervals from HAC standard errors, valid on an autocorrelated residual;"
+                     + (" values corrected for the sensor noise in the regressors by SIMEX)" if a.eiv_bias is not None
+                        else ")"))
         return "\n".join(lines)
 
 

@@ -87,12 +87,12 @@ class InertiaEstimate:
 TRUST_RATIO = 1.5
 
 
-def _widest(model: Sequence[str]) -> tuple[str, ...]:
-    """The model with every library effect added (``ip`` is read with all of them free,
-    so that a missing one cannot bias it), the stiffness last."""
+def _widest(model: Sequence[str], candidates: Sequence[str] = ()) -> tuple[str, ...]:
+    """The model with every library effect and candidate (user effects) added (``ip`` is
+    read with all of them free, so that a missing one cannot bias it), the stiffness last."""
     from .model import LIBRARY_CANDIDATES
 
-    effects = [e for e in (*model, *LIBRARY_CANDIDATES) if e != "stiffness"]
+    effects = [e for e in (*model, *LIBRARY_CANDIDATES, *candidates) if e != "stiffness"]
     if "unbalance_in_phase" in effects:  # shares tau with the unbalance
         effects = [e for e in effects if e != "unbalance"]
     return (*dict.fromkeys(effects), "stiffness")
@@ -110,7 +110,8 @@ def _ip_fit(data: np.ndarray, effects: tuple[str, ...]):
 
 
 def estimate_ip_and_stiffness(meas: Measurements | np.ndarray, model: Sequence[str],
-                              raw: np.ndarray | None = None, noise_gain: float = 1.0) -> InertiaEstimate:
+                              raw: np.ndarray | None = None, noise_gain: float = 1.0,
+                              candidates: Sequence[str] = ()) -> InertiaEstimate:
     """``ip`` (HAC standard error, :mod:`identifier.hac`) and ``k`` from a fit of ``model``
     plus every library effect with ``ip`` and ``k`` unknown.
 
@@ -123,19 +124,20 @@ def estimate_ip_and_stiffness(meas: Measurements | np.ndarray, model: Sequence[s
         data = meas.data[amp > 0.1 * amp.max()] if amp.max() > 0 else meas.data
     else:
         data = np.asarray(meas, dtype=float)
-    spec, A, y = _ip_fit(data, _widest(model))
+    widest = _widest(model, candidates)
+    spec, A, y = _ip_fit(data, widest)
     keep = np.linalg.norm(A, axis=0) > 0
     if not keep[0]:
         return InertiaEstimate(math.nan, math.inf, math.nan, math.inf)
     A = A[:, keep]
     theta, *_ = np.linalg.lstsq(A, y, rcond=None)
     resid = y - A @ theta
-    cov = hac_covariance(A, resid)
+    cov = hac_covariance(A, resid, rows_per_time=2)  # both equations per sample
     k_col = 1 + spec.columns.index("k")
     k = float(theta[int(np.sum(keep[:k_col]))]) if keep[k_col] else math.nan
     ratio = math.nan
     if raw is not None:
-        _, A_raw, y_raw = _ip_fit(raw, _widest(model))
+        _, A_raw, y_raw = _ip_fit(raw, widest)
         r_raw = y_raw - A_raw[:, keep] @ theta
         floor = math.sqrt(0.5 * (noise_floor(r_raw[0::2]) ** 2 + noise_floor(r_raw[1::2]) ** 2)) * noise_gain
         rms = float(np.sqrt(np.mean(resid * resid)))

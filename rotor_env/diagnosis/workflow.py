@@ -6,11 +6,14 @@ import math
 import warnings
 from collections.abc import Sequence
 
+import numpy as np
+
 from ..effects import EFFECTS, get_effect
 from ..measurements import Measurements
 from .candidates import Candidate, _appears_or_changes, _change_time, _rank
 from .checks import check_candidate
 from .compare import Comparison, _Data, _known, compare, make_robust
+from .eiv import correct_errors_in_variables
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES, Model, _as_model, _validate_columns
 from .orders import _first_rows, failing_windows
 from .result import Diagnosis, NotIdentifiableResult
@@ -37,14 +40,26 @@ def fit(
     window_fraction: float = 0.1,
     t_start: float | None = None,
     alpha: float = 0.05,
+    onsets: dict[str, float] | None = None,
 ) -> Comparison:
-    """Fit one model and compare it with the measurements (no search; HAC standard
-    errors and effect tests, as :func:`diagnose` reports them)."""
+    """Fit one model and compare it with the measurements (no search).
+
+    As :func:`diagnose` reports its final model: HAC standard errors and effect tests,
+    coefficients corrected for the noise in the regressors (:mod:`.eiv`).  ``onsets``
+    makes effects appear mid-run (``{"asymmetry": 250.0}``: a crack opening at t = 250).
+    """
     model = _as_model(model)
+    onsets = dict(onsets or {})
+    for e, tc in onsets.items():
+        if e not in model:
+            raise ValueError(f"onset given for {e!r}, which is not in the model ({', '.join(model)})")
+        if not math.isfinite(tc):
+            raise ValueError(f"the onset of {e!r} must be a finite time, got {tc!r}")
     data = _Data(measurements, ip, equation, window_fraction, t_start)
     for e in model:
         _validate_columns(EFFECTS[e], data.data, ip)
-    return compare(data, model.effects, _known(model.effects), robust=True, alpha=alpha)
+    comp = compare(data, model.effects, _known(model.effects), onsets, robust=True, alpha=alpha)
+    return correct_errors_in_variables(data, comp)
 
 
 def diagnose(
@@ -82,9 +97,13 @@ def diagnose(
     if "unbalance_in_phase" in model:
         candidates = [c for c in candidates if c != "unbalance"]
     notes: list[str] = []
+    # a user effect whose columns are broken is said before anything uses them
+    samples = np.ascontiguousarray(measurements.data)
+    for e in (*model, *candidates):
+        _validate_columns(EFFECTS[e], samples, 0.3 if ip is None else float(ip))
     try:
         check_excitation(measurements)
-        k_hat = estimate_ip_and_stiffness(measurements, model.effects).k
+        k_hat = estimate_ip_and_stiffness(measurements, model.effects, candidates=candidates).k
         time_scale = 1.0
         if math.isfinite(k_hat) and not (K_RANGE[0] <= k_hat <= K_RANGE[1]):
             if k_hat <= 0:
@@ -97,7 +116,7 @@ def diagnose(
         # the window and prefilter do not depend on ip: read ip on the data every fit uses
         data = _Data(measurements, 0.3 if ip is None else float(ip), equation, window_fraction, t_start)
         check_excitation(data.raw)
-        est = estimate_ip_and_stiffness(data.data, model.effects, data.raw_data, data.noise_gain)
+        est = estimate_ip_and_stiffness(data.data, model.effects, data.raw_data, data.noise_gain, candidates)
         ip_hat, ip_se = est.ip, est.standard_error
         if not math.isfinite(ip_hat):
             raise NotIdentifiable("the gyroscopic moment is not excited (no speed or no rates)")
@@ -123,8 +142,6 @@ def diagnose(
         data.ip = ip_used
     except NotIdentifiable as exc:
         return NotIdentifiableResult(source=measurements.source, reason=str(exc), ip=ip, notes=notes)
-    for e in (*model, *candidates):
-        _validate_columns(EFFECTS[e], data.data, ip_used)
     pbar = None
     if progress:
         from tqdm.auto import tqdm
@@ -161,6 +178,8 @@ def diagnose(
     }
     for comp in {id(c): c for c in (before, *steps, current)}.values():
         make_robust(data, comp, alpha)
+    # the reported values: noise in the regressors biases c and h low (see .eiv)
+    correct_errors_in_variables(data, current)
     floor = estimate_noise_floor(data, current)
     # the first equation's rows: one residual per sample, white where the model is right
     windows, _ = failing_windows(data.meas.t, _first_rows(before.residual, equation), floor=floor,
