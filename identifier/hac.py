@@ -42,6 +42,7 @@ from scipy import stats
 
 __all__ = [
     "andrews_bandwidth",
+    "chi2_log10_sf",
     "hac_covariance",
     "long_run_covariance",
     "score_test",
@@ -132,7 +133,7 @@ def hac_covariance(X: np.ndarray, resid: np.ndarray, bandwidth: int | None = Non
     return Xi @ S @ Xi
 
 
-def _chi2_log10_sf(stat: float, q: int) -> float:
+def chi2_log10_sf(stat: float, q: int) -> float:
     """log10 of the chi-square survival function, finite far into the tail."""
     if not math.isfinite(stat):
         return 0.0 if stat < 0 else -math.inf
@@ -150,7 +151,7 @@ def wald_test(theta: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
     theta = np.atleast_1d(np.asarray(theta, dtype=float))
     q = len(theta)
     W = float(theta @ np.linalg.pinv(np.atleast_2d(cov)) @ theta)
-    return W / q, _chi2_log10_sf(W, q)
+    return W / q, chi2_log10_sf(W, q)
 
 
 def wald_group_test(X: np.ndarray, resid: np.ndarray, theta_group: np.ndarray, group,
@@ -194,4 +195,4 @@ def score_test(X: np.ndarray, Z: np.ndarray, resid: np.ndarray, bandwidth: int |
     if q == 0:
         return 0.0, 0.0
     LM = float(s @ np.linalg.pinv(S, rcond=1e-12) @ s)
-    return LM / q, _chi2_log10_sf(LM, q)
+    return LM / q, chi2_log10_sf(LM, q)

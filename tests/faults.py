@@ -55,6 +55,7 @@ __all__ = [
     "healthy",
     "loose_pedestal",
     "probe_runout",
+    "rub",
     "with_rotor",
     "zeros",
 ]
@@ -143,6 +144,21 @@ def _loose_columns(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
     return (beyond,), (0.0 * th_x,)
 
 
+#: the rub's radial clearance: beyond |theta| = RUB_GAP the disk touches the casing
+RUB_GAP = 0.04
+#: the rub's friction coefficient (a fixed material constant, not identified)
+RUB_FRICTION = 0.2
+
+
+def _rub_columns(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
+    # radial contact beyond the clearance, friction against the forward-turning surface:
+    # M_y + i M_x = -k_c max(|z| - gap, 0) (1 + i mu) z/|z|
+    r = np.sqrt(th_x * th_x + th_y * th_y) + 1e-12
+    pen = 0.5 * ((r - RUB_GAP) + np.abs(r - RUB_GAP)) / r
+    mu = RUB_FRICTION
+    return (-pen * (th_y - mu * th_x),), (-pen * (th_x + mu * th_y),)
+
+
 def _polar(amp: str, phase: str):
     def to_coef(p):
         return (p[amp] * math.cos(p[phase]), p[amp] * math.sin(p[phase]))
@@ -218,6 +234,20 @@ UNDECLARED: dict[str, Effect] = {
         cause="bearing supports stiffer in y than in x (fixed frame, not turning with the shaft)",
         signature="mirrors the forward 1x response into a backward (-1x) line; splits the critical",
         orders=(-1,),
+    ),
+    "undeclared_rub": Effect(
+        name="undeclared_rub",
+        parameters=(Parameter("rub", 0.5, "contact stiffness of the casing beyond the clearance", 0.0),),
+        coefficients=("rub",),
+        columns=_rub_columns,
+        to_coefficients=_one("rub")[0],
+        from_coefficients=_one("rub")[1],
+        moment="M_y + i M_x = -k_c max(|z| - gap, 0) (1 + i mu) z/|z|",
+        cause="a rub: beyond a radial clearance the disk touches the casing (contact stiffness "
+        "and friction against the turning surface)",
+        signature="while |theta| exceeds the clearance (around the critical): a stiffening and a "
+        "cross-coupled friction moment along the whirl, 1x forward for a synchronous circular orbit",
+        orders=(1,),
     ),
     "undeclared_loose": Effect(
         name="undeclared_loose",
@@ -354,6 +384,21 @@ def loose_pedestal(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, 
     or one-directional (the quadratic stiffness is even: 0x and 2x).
     """
     return _faulty("undeclared_loose", {"loose": kappa}, seed, noise, rotor, run_up, t_end, dt)
+
+
+def rub(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_up: RunUp = RUN_UP,
+        t_end: float = 400.0, dt: float = 0.01, k_contact: float = 0.5) -> Measurements:
+    """A rub against the casing.
+
+    Cause: near the critical speed the whirl exceeds the radial clearance ``RUB_GAP`` and
+    the disk touches the casing: a contact stiffness ``k_contact`` on the penetration
+    and a friction moment (``RUB_FRICTION``) against the forward-turning surface.  Moment
+    ``M_y + i M_x = -k_c max(|z| - gap, 0) (1 + i mu) z/|z|``.  Signature: only while
+    ``|theta|`` exceeds the gap; for the synchronous, nearly circular orbit it is a 1x
+    forward moment (a stiffening plus a cross-coupling) that comes and goes with the
+    amplitude — a stiffness change fitted over the whole run is not constant in time.
+    """
+    return _faulty("undeclared_rub", {"rub": k_contact}, seed, noise, rotor, run_up, t_end, dt)
 
 
 def probe_runout(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_up: RunUp = RUN_UP,

@@ -51,6 +51,7 @@ FAULTS = {
     "support anisotropy": (F.anisotropy, (1, "backward")),
     "loose pedestal": (F.loose_pedestal, (1, None)),
     "probe runout": (F.probe_runout, (1, "forward")),
+    "rub": (F.rub, (1, "forward")),
 }
 
 
@@ -109,7 +110,7 @@ def _order_shares(window, residual) -> dict[int, float]:
 @pytest.mark.parametrize("fault", list(FAULTS))
 def test_generator_fault_leaves_its_orders(fault, seed):
     """The fault-free model leaves a residual of at least 3x the noise (measured: 5-11x)
-    in the fault's orders (measured shares: bow, 2x, 3x, runout 0.99-1.00 in +1/+2/+3/+1;
+    in the fault's orders (measured shares: bow, 2x, 3x, runout, rub 0.99-1.00 in +1/+2/+3/+1/+1;
     anisotropy 0.90 in -1; loose pedestal 0.46-0.47 in each of +1 and -1)."""
     residual, window = _fault_free_residual(_fault_run(fault, seed), F.BASE.model, F.BASE.ip)
     healthy, _ = _fault_free_residual(F.healthy(seed, **F.FAST), F.BASE.model, F.BASE.ip)
@@ -235,3 +236,16 @@ def test_no_information_is_not_identifiable(case):
     d = diagnose(meas, model=F.BASE.model, ip=F.BASE.ip)
     assert d.verdict == "not_identifiable", d.verdict
     assert d.missing == []
+
+
+# ------------------------------------------------------------ coasting down
+@pytest.mark.parametrize("fault", ["bow", "2x forcing", "support anisotropy", "rub"])
+def test_undeclared_fault_coasting_down(fault):
+    """The same faults on a coast-down from speed 4 (the critical passed decelerating):
+    an honest verdict, nothing added, the fault's order and whirl direction on top."""
+    meas = FAULTS[fault][0](3, run_up=F.COAST_DOWN, t_end=F.COAST_DOWN_T_END, dt=0.02)
+    d = diagnose(meas, model=F.BASE.model, ip=F.BASE.ip)
+    assert d.verdict in HONEST and not set(d.missing) & ABSENT, (d.verdict, d.missing)
+    top = d.unexplained["orders"][0]
+    order, direction = FAULTS[fault][1]
+    assert (top["order"], top["direction"]) == (order, direction) and top["share"] > 0.5, d.unexplained

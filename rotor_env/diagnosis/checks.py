@@ -30,9 +30,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import stats
 
-from identifier.hac import hac_covariance
+from identifier.hac import chi2_log10_sf, hac_covariance
 
 from ..effects import EFFECTS
 from .compare import Comparison, _Data, _design, _known, compare
@@ -154,7 +153,7 @@ def _consistent(data: _Data, comp: Comparison, effect: str, onset: float | None,
     pooled = np.linalg.pinv(sum(infos)) @ sum(i @ th for i, th in zip(infos, thetas, strict=True))
     Q = float(sum((th - pooled) @ i @ (th - pooled) for i, th in zip(infos, thetas, strict=True)))
     df = (len(est) - 1) * len(pooled)
-    log10_p = float(stats.chi2.logsf(Q, df) / math.log(10.0))
+    log10_p = chi2_log10_sf(Q, df)
     # the effect's size is its departure from what the model without it assumed (a
     # stiffness change is k - 1, not k)
     size = float(np.linalg.norm(pooled - (0.0 if null is None else null)))
