@@ -249,3 +249,37 @@ def test_undeclared_fault_coasting_down(fault):
     top = d.unexplained["orders"][0]
     order, direction = FAULTS[fault][1]
     assert (top["order"], top["direction"]) == (order, direction) and top["share"] > 0.5, d.unexplained
+
+
+# ------------------------------------------------------------ units of time
+def _in_time_unit(meas, w: float):
+    """The record with time in a unit where the natural frequency is ``w`` rad per unit."""
+    from rotor_env.measurements import Measurements
+
+    d = meas.data.copy()
+    d[:, 0] /= w
+    d[:, [2, 6, 7]] *= w
+    d[:, [3, 8, 9]] *= w * w
+    return Measurements(d)
+
+
+@pytest.mark.parametrize("w", [2 * np.pi * 40.0, 2 * np.pi * 0.04, 3.0, 1 / 3.0],
+                         ids=["seconds, 40 Hz", "milliseconds, 40 Hz", "x3", "/3"])
+def test_any_time_unit_is_rescaled(w):
+    """Time in seconds, milliseconds or any unit: the time scale is identified and the
+    diagnosis is the same as in the model's unit (healthy: explained, nothing added)."""
+    meas = _in_time_unit(_healthy_run("heavy", HEALTHY_SEEDS[0]), w)
+    d = diagnose(meas, model=F.HEALTHY["heavy"].model, ip=F.HEALTHY["heavy"].ip)
+    assert d.time_scale == pytest.approx(w, rel=0.01)
+    assert d.verdict == "explained" and d.missing == [], (d.verdict, d.missing)
+
+
+def test_failing_windows_on_records_shorter_than_the_window():
+    """A rolling window longer than the record (time in seconds, 2 time units wide) once
+    raised IndexError; now the window is the record."""
+    from rotor_env.diagnosis import failing_windows
+
+    t = np.linspace(0.0, 0.5, 50)
+    r = np.where(t > 0.25, 1.0, 0.01) + 0.001 * np.sin(40 * t)
+    windows, floor = failing_windows(t, r, width=2.0, floor=0.01)
+    assert windows and windows[0]["t_start"] <= 0.3 and windows[0]["peak_rms_over_floor"] > 2
