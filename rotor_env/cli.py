@@ -156,7 +156,7 @@ def _add_simulate_parser(sub) -> None:
     p = sub.add_parser(
         "simulate",
         help="simulate a run-up and write the measurements (CSV or Parquet)",
-        description="Simulate the accelerating rotor (PHYSICS.md) from rest and write the ten "
+        description="Simulate the accelerating rotor (docs/PHYSICS.md) from rest and write the ten "
         "measurement columns to OUT: CSV, or Parquet when OUT ends in .parquet. "
         f"Parameters (default: the paper's Table 1): {', '.join(RotorParams.known_names())}.",
     )

@@ -92,6 +92,7 @@ class Effect:
         missing effect leaves residual energy; ``()`` when not tied to the spin.
     dry_friction: the moment is set-valued (Coulomb): the simulator integrates it with a
         stick/slip switch model; the columns give its slipping direction.
+    caveat: a lookalike the data cannot tell apart from it (reported when it is added).
     """
 
     name: str
@@ -105,6 +106,8 @@ class Effect:
     signature: str
     orders: tuple[int, ...] = ()
     dry_friction: bool = False
+    #: what these data cannot tell it from (said whenever the diagnosis adds it)
+    caveat: str = ""
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -170,6 +173,80 @@ def _static_load(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
 
 def _stiffness(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
     return (-th_y,), (-th_x,)
+
+
+# --------------------------------------------------------------------------- field faults
+# The faults a machine in the field has more often than the paper's effects, each the
+# lookalike of one of them.  Complex notation (docs/PHYSICS.md): z = th_y + i th_x, a
+# moment M_y + i M_x; e^{+i k phi} is order k, forward for k > 0.
+
+def _shaft_bow(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
+    s, c = np.sin(phi), np.cos(phi)
+    # M = b e^{i(phi + gamma)}: the shaft's elastic line offset by the bow, turning with it;
+    # coefficients (b cos gamma, b sin gamma)
+    return (c, -s), (s, c)
+
+
+def _support_anisotropy(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
+    # k_y = 1 + delta, k_x = 1 - delta (fixed frame): M = -delta conj(z)
+    return (-th_y,), (th_x,)
+
+
+def _cross_coupled(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
+    # M = i q z: a tangential moment along a forward whirl (it feeds it)
+    return (-th_x,), (th_y,)
+
+
+def _misalignment(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
+    s, c = np.sin(phi), np.cos(phi)
+    s2, c2 = 2.0 * s * c, c * c - s * s
+    # M = f e^{i(2phi + g)} + f_b e^{-i(2phi + g_b)}; coefficients
+    # (f cos g, f sin g, f_b cos g_b, f_b sin g_b)
+    return (c2, -s2, c2, -s2), (s2, c2, -s2, -c2)
+
+
+def _breathing_crack(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
+    s, c = np.sin(phi), np.cos(phi)
+    s2, c2 = 2.0 * s * c, c * c - s * s
+    # G = z + conj(z) e^{2 i phi} = 2 xi e^{i phi}, xi the deflection across the crack
+    g_y = th_y + th_y * c2 + th_x * s2
+    g_x = th_x + th_y * s2 - th_x * c2
+    # M = (dk/4) (1 + depth cos(phi + alpha)) G; coefficients
+    # (dk/4, depth dk/4 cos alpha, depth dk/4 sin alpha)
+    return (g_y, c * g_y, -s * g_y), (g_x, c * g_x, -s * g_x)
+
+
+def _polar(amp: str, phase: str):
+    def to_coef(p: Mapping[str, float]) -> tuple[float, float]:
+        return (float(p[amp]) * math.cos(p[phase]), float(p[amp]) * math.sin(p[phase]))
+
+    def from_coef(c) -> dict[str, float]:
+        return {amp: float(math.hypot(c[0], c[1])), phase: float(math.atan2(c[1], c[0]))}
+
+    return to_coef, from_coef
+
+
+def _misalignment_to(p: Mapping[str, float]) -> tuple[float, ...]:
+    return (*_polar("misalignment", "misalignment_phase")[0](p),
+            *_polar("misalignment_back", "misalignment_back_phase")[0](p))
+
+
+def _misalignment_from(c) -> dict[str, float]:
+    return {**_polar("misalignment", "misalignment_phase")[1](c[:2]),
+            **_polar("misalignment_back", "misalignment_back_phase")[1](c[2:])}
+
+
+def _breathing_to(p: Mapping[str, float]) -> tuple[float, float, float]:
+    a0 = 0.25 * float(p["dk_crack"])
+    return (a0, a0 * p["breathing_depth"] * math.cos(p["breathing_phase"]),
+            a0 * p["breathing_depth"] * math.sin(p["breathing_phase"]))
+
+
+def _breathing_from(c) -> dict[str, float]:
+    a0, amp = float(c[0]), float(math.hypot(c[1], c[2]))
+    return {"dk_crack": 4.0 * a0, "breathing_depth": amp / a0 if a0 != 0 else math.inf,
+            "breathing_phase": float(math.atan2(c[2], c[1]))}
+
 
 
 def _identity(names: tuple[str, ...]):
@@ -370,6 +447,121 @@ register_effect(
         cause="a constant side load: gravity on a horizontal shaft, bearing misalignment, a magnetic pull",
         signature="a static deflection: 0x in the fixed frame (with asymmetry, the crack's 2x)",
         orders=(0,),
+    )
+)
+
+# --------------------------------------------------------------------------- field faults
+_to, _from = _polar("bow", "bow_phase")
+register_effect(
+    Effect(
+        name="shaft_bow",
+        parameters=(
+            Parameter("bow", 0.01, "residual bow of the shaft at the disk [rad]", 0.0, 0.05,
+                      "a bow tilting the disk by more than 0.05 rad (3 deg) is a bent shaft no machine runs with",
+                      _NON_NEGATIVE),
+            Parameter("bow_phase", 0.0, "angle of the bow against phi = 0 [rad]"),
+        ),
+        coefficients=("bow_cos", "bow_sin"),
+        columns=_shaft_bow,
+        to_coefficients=_to,
+        from_coefficients=_from,
+        moment="b e^{i(phi + gamma)}:  b cos(phi+gamma),  b sin(phi+gamma)",
+        cause="a bent shaft (thermal bow, sag, a straightening that did not hold): its elastic line is "
+        "offset in a direction fixed to the shaft",
+        signature="1x forward of constant forcing amplitude: present at slow roll (a static deflection b "
+        "turning with the shaft), resonant at the critical; the unbalance's forcing grows with speed^2",
+        orders=(1,),
+        caveat="a probe runout (an out-of-round or marked probe track) leaves the same 1x pattern in the "
+        "equations: one probe plane cannot tell it from a bow; compare with the runout measured on the "
+        "track at slow roll, or with a second probe plane",
+    )
+)
+_to, _from = _identity(("support_anisotropy",))
+register_effect(
+    Effect(
+        name="support_anisotropy",
+        parameters=(Parameter("support_anisotropy", 0.05, "support stiffness split (k_y - k_x)/2k, fixed frame",
+                              -0.3, 0.3, "supports whose stiffnesses differ by a factor above 1.9 (0.3) are a "
+                              "broken pedestal, not an anisotropy"),),
+        coefficients=("support_anisotropy",),
+        columns=_support_anisotropy,
+        to_coefficients=_to,
+        from_coefficients=_from,
+        moment="-delta conj(z):  -delta th_y,  +delta th_x",
+        cause="bearing pedestals or foundation stiffer in one direction than the other (fixed frame, "
+        "not turning with the shaft)",
+        signature="two criticals sqrt(1 -+ delta); elliptic orbits: the forward 1x response mirrored into "
+        "a backward (-1x) line, largest between the criticals; no 2x (a shaft asymmetry keeps 1x forward "
+        "and shows 2x with a side load)",
+        orders=(-1,),
+    )
+)
+_to, _from = _identity(("cross_coupling",))
+register_effect(
+    Effect(
+        name="cross_coupled_stiffness",
+        parameters=(Parameter("cross_coupling", 0.01, "cross-coupled stiffness q/k (tangential moment per tilt)",
+                              -0.1, 0.1, "a cross-coupling above 0.1 of the direct stiffness exceeds the damping of "
+                              "any rotor that reaches its critical (instability threshold q = c w)"),),
+        coefficients=("cross_coupling",),
+        columns=_cross_coupled,
+        to_coefficients=_to,
+        from_coefficients=_from,
+        moment="i q z:  -q th_x,  +q th_y",
+        cause="fluid-film bearings, seals, aerodynamic (Alford) forces: a moment at right angles to the tilt",
+        signature="feeds forward whirl: lowers the apparent damping of the forward mode (at a whirl w it "
+        "acts as a damping -q/w) and destabilises it above q = c w; unlike damping it does not grow with "
+        "the whirl frequency",
+        orders=(1,),
+    )
+)
+register_effect(
+    Effect(
+        name="misalignment",
+        parameters=(
+            Parameter("misalignment", 0.005, "forward 2x moment of the misaligned coupling", 0.0, 0.05,
+                      "a 2x moment above 0.05 bends the shaft by 3 deg twice per turn: a broken coupling",
+                      _NON_NEGATIVE),
+            Parameter("misalignment_phase", 0.0, "its phase against 2 phi [rad]"),
+            Parameter("misalignment_back", 0.0, "backward 2x moment (a misalignment along a fixed line: "
+                      "forward and backward alike)", 0.0, 0.05, "as the forward one", _NON_NEGATIVE),
+            Parameter("misalignment_back_phase", 0.0, "its phase [rad]"),
+        ),
+        coefficients=("misalignment_cos", "misalignment_sin", "misalignment_back_cos", "misalignment_back_sin"),
+        columns=_misalignment,
+        to_coefficients=_misalignment_to,
+        from_coefficients=_misalignment_from,
+        moment="f e^{i(2phi + g)} + f_b e^{-i(2phi + g_b)}",
+        cause="coupling misalignment (parallel or angular): the coupling bends the shaft twice per "
+        "revolution; it also brings a static preload (declare static_load for it)",
+        signature="2x (forward, and backward for a fixed-line misalignment) of constant amplitude, at "
+        "every speed; weakly resonant where 2x meets a natural frequency (near half the critical). "
+        "A crack's 2x needs a side load and grows with the static deflection",
+        orders=(2, -2),
+    )
+)
+register_effect(
+    Effect(
+        name="breathing_crack",
+        parameters=(
+            Parameter("dk_crack", 0.1, "stiffness lost across a fully open crack (Delta k / k)", 0.0, 0.6,
+                      "a crack through half the shaft lowers the bending stiffness across it by about 60 %",
+                      _NON_NEGATIVE),
+            Parameter("breathing_depth", 1.0, "how far the crack opens and closes (0: always half open, "
+                      "1: fully open to closed)", 0.0, 1.3, "the opening cannot swing beyond fully open and "
+                      "closed (1; +30 % for noise)"),
+            Parameter("breathing_phase", 0.0, "angle at which the crack is fully open [rad]"),
+        ),
+        coefficients=("crack_mean", "crack_breathing_cos", "crack_breathing_sin"),
+        columns=_breathing_crack,
+        to_coefficients=_breathing_to,
+        from_coefficients=_breathing_from,
+        moment="(dk/4) (1 + depth cos(phi + alpha)) (z + conj(z) e^{2 i phi})  (Mayes' cosine breathing)",
+        cause="a fatigue crack that opens and closes once per turn as the bending across it (gravity, a "
+        "side load) changes sign",
+        signature="with a side load: 1x, 2x and 3x; resonances at 1/2 and 1/3 of the critical (sub-critical "
+        "2x and 3x peaks); the always-open asymmetry has the 2x only",
+        orders=(1, 2, 3),
     )
 )
 

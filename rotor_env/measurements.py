@@ -10,7 +10,7 @@ import numpy as np
 
 __all__ = ["ANGLE_CHANNELS", "COLUMNS", "Measurements"]
 
-#: Column order of every measurement array and file (dimensionless units, PHYSICS.md).
+#: Column order of every measurement array and file (dimensionless units, docs/PHYSICS.md 1.4).
 COLUMNS: tuple[str, ...] = (
     "t",
     "phi",

@@ -38,7 +38,7 @@ class Crack:
 
 @dataclass(frozen=True)
 class RotorParams:
-    """All parameters of a rotor (dimensionless units of PHYSICS.md).
+    """All parameters of a rotor (dimensionless units of docs/PHYSICS.md, section 1.4).
 
     ``ip`` is the polar/transverse inertia ratio (in [0, 1)); ``values`` holds every
     parameter of the effects in ``effects`` (defaults: the paper's Table 1, read from

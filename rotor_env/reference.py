@@ -1,6 +1,6 @@
 """A tight, independent reference solution of the rotor equations (for validation).
 
-The equations of PHYSICS.md section 1 written out by hand (deliberately *not* from
+The equations of docs/PHYSICS.md section 1 written out by hand (deliberately *not* from
 the effect declarations, so that comparing with the simulator checks both), with the
 friction regularised as ``S -> sqrt(S^2 + eps^2)`` and integrated by
 ``scipy.integrate.solve_ivp(method="LSODA", rtol=1e-9, atol=1e-12)``, split at a crack.

@@ -1,4 +1,4 @@
-"""From measurements to the linear regression ``y = X theta + e`` (PHYSICS.md section 3).
+"""From measurements to the linear regression ``y = X theta + e`` (docs/PHYSICS.md section 3).
 
 The regression is generated from the effect declarations: for the first equation
 

@@ -205,16 +205,26 @@ class Simulator:
 
     params: RotorParams
     max_substep: float = MAX_SUBSTEP
+    #: compile the acceleration for these effects (a superset of the rotor's; absent ones
+    #: get zero coefficients): one compilation serves every model drawn from the set
+    compiled_for: tuple[str, ...] | None = None
     accel: object = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.max_substep) and self.max_substep > 0):
             raise ValueError(f"max_substep must be > 0, got {self.max_substep!r}")
-        self.accel = compile_accel(self.params.effects)
+        own = tuple(self.params.effects)
+        if self.compiled_for is None:
+            layout = own
+        else:
+            layout = tuple(dict.fromkeys((*self.compiled_for, *own)))
+        object.__setattr__(self, "compiled_for", layout)
+        self.accel = compile_accel(layout)
 
     def coefficients(self, t: float | None = None) -> tuple[np.ndarray, float]:
         eff = self.params.effects
-        coef = [c for e in smooth_effects(eff) for c in self.params.coefficients(e.name, t)]
+        coef = [c for e in smooth_effects(self.compiled_for)
+                for c in (self.params.coefficients(e.name, t) if e.name in eff else (0.0,) * len(e.coefficients))]
         fr = friction_effect(eff)
         h = self.params.coefficients(fr.name, t)[0] if fr is not None else 0.0
         return np.array(coef, dtype=float), float(h)
@@ -355,14 +365,16 @@ def free_run(
     phi_dot: np.ndarray,
     initial: tuple[float, float, float, float],
     max_substep: float = MAX_SUBSTEP,
+    compiled_for: tuple[str, ...] | None = None,
 ) -> Measurements:
     """Simulate ``params`` driven by a measured spin profile from a measured initial state.
 
     Output error simulation (as MATLAB's ``compare``): nothing from the measured
     inclinations is used after ``t[0]``.  Raises :class:`SimulationError` if the model
-    diverges.
+    diverges.  ``compiled_for``: see :class:`Simulator` (the diagnosis passes the whole
+    library, so that its many candidate models share one compiled kernel).
     """
-    sim = Simulator(params, max_substep=max_substep)
+    sim = Simulator(params, max_substep=max_substep, compiled_for=compiled_for)
     t = np.ascontiguousarray(t, dtype=float)
     if len(t) < 2:
         raise ValueError("free_run needs at least two samples")

@@ -262,7 +262,7 @@ def _test_stats(R, col_sq, rtol, masks, m_eff, last, starts, ends, enough, var_f
 
 
 def _relative_speed(data: np.ndarray) -> np.ndarray:
-    """Speed of the disk relative to the rotating shaft, per sample (PHYSICS.md: ``S``).
+    """Speed of the disk relative to the rotating shaft, per sample (docs/PHYSICS.md 1.5.6: ``S``).
 
     While the disk sticks to the shaft (dry friction, ``S ~ 0``) the samples carry no
     information on the dynamics and bias the unbalance and damping estimates towards

@@ -170,11 +170,11 @@ def _polar(amp: str, phase: str):
 
 
 def _order2_to(p):
-    return (*_polar("f2", "f2_phase")[0](p), *_polar("f2_back", "f2_back_phase")[0](p))
+    return (*_polar("sim_f2", "sim_f2_phase")[0](p), *_polar("sim_f2_back", "sim_f2_back_phase")[0](p))
 
 
 def _order2_from(c):
-    return {**_polar("f2", "f2_phase")[1](c[:2]), **_polar("f2_back", "f2_back_phase")[1](c[2:])}
+    return {**_polar("sim_f2", "sim_f2_phase")[1](c[:2]), **_polar("sim_f2_back", "sim_f2_back_phase")[1](c[2:])}
 
 
 def _one(name: str):
@@ -184,12 +184,12 @@ def _one(name: str):
 UNDECLARED: dict[str, Effect] = {
     "undeclared_bow": Effect(
         name="undeclared_bow",
-        parameters=(Parameter("bow", 0.015, "bow forcing amplitude (the bow's elastic moment)", 0.0),
-                    Parameter("bow_phase", 0.0, "bow phase gamma [rad]")),
+        parameters=(Parameter("sim_bow", 0.015, "bow forcing amplitude (the bow's elastic moment)", 0.0),
+                    Parameter("sim_bow_phase", 0.0, "bow phase gamma [rad]")),
         coefficients=("bow_cos", "bow_sin"),
         columns=_bow_columns,
-        to_coefficients=_polar("bow", "bow_phase")[0],
-        from_coefficients=_polar("bow", "bow_phase")[1],
+        to_coefficients=_polar("sim_bow", "sim_bow_phase")[0],
+        from_coefficients=_polar("sim_bow", "sim_bow_phase")[1],
         moment="M_y + i M_x = b i e^{i(phi + gamma)}",
         cause="a bent (bowed) shaft: its elastic line is offset in a direction fixed to the shaft",
         signature="1x forward of constant amplitude (does not grow with speed^2 as an unbalance)",
@@ -197,10 +197,10 @@ UNDECLARED: dict[str, Effect] = {
     ),
     "undeclared_2x": Effect(
         name="undeclared_2x",
-        parameters=(Parameter("f2", 0.008, "forward 2x forcing amplitude", 0.0),
-                    Parameter("f2_phase", 0.0, "its phase [rad]"),
-                    Parameter("f2_back", 0.0, "backward 2x forcing amplitude", 0.0),
-                    Parameter("f2_back_phase", 0.0, "its phase [rad]")),
+        parameters=(Parameter("sim_f2", 0.008, "forward 2x forcing amplitude", 0.0),
+                    Parameter("sim_f2_phase", 0.0, "its phase [rad]"),
+                    Parameter("sim_f2_back", 0.0, "backward 2x forcing amplitude", 0.0),
+                    Parameter("sim_f2_back_phase", 0.0, "its phase [rad]")),
         coefficients=("f2_cos", "f2_sin", "f2_back_cos", "f2_back_sin"),
         columns=_order2_columns,
         to_coefficients=_order2_to,
@@ -212,12 +212,12 @@ UNDECLARED: dict[str, Effect] = {
     ),
     "undeclared_3x": Effect(
         name="undeclared_3x",
-        parameters=(Parameter("f3", 0.006, "forward 3x forcing amplitude", 0.0),
-                    Parameter("f3_phase", 0.0, "its phase [rad]")),
+        parameters=(Parameter("sim_f3", 0.006, "forward 3x forcing amplitude", 0.0),
+                    Parameter("sim_f3_phase", 0.0, "its phase [rad]")),
         coefficients=("f3_cos", "f3_sin"),
         columns=_order3_columns,
-        to_coefficients=_polar("f3", "f3_phase")[0],
-        from_coefficients=_polar("f3", "f3_phase")[1],
+        to_coefficients=_polar("sim_f3", "sim_f3_phase")[0],
+        from_coefficients=_polar("sim_f3", "sim_f3_phase")[1],
         moment="M_y + i M_x = f e^{i(3 phi + g)}",
         cause="a three-lobed coupling or blade-pass-like excitation, three times per revolution",
         signature="3x forward, amplitude independent of speed",
@@ -225,11 +225,11 @@ UNDECLARED: dict[str, Effect] = {
     ),
     "undeclared_anisotropy": Effect(
         name="undeclared_anisotropy",
-        parameters=(Parameter("aniso", 0.08, "support anisotropy delta: k_y = 1+delta, k_x = 1-delta"),),
-        coefficients=("aniso",),
+        parameters=(Parameter("sim_aniso", 0.08, "support anisotropy delta: k_y = 1+delta, k_x = 1-delta"),),
+        coefficients=("sim_aniso",),
         columns=_anisotropy_columns,
-        to_coefficients=_one("aniso")[0],
-        from_coefficients=_one("aniso")[1],
+        to_coefficients=_one("sim_aniso")[0],
+        from_coefficients=_one("sim_aniso")[1],
         moment="M_y = -delta th_y,  M_x = +delta th_x  (M_y + i M_x = -delta conj(z))",
         cause="bearing supports stiffer in y than in x (fixed frame, not turning with the shaft)",
         signature="mirrors the forward 1x response into a backward (-1x) line; splits the critical",
@@ -237,11 +237,11 @@ UNDECLARED: dict[str, Effect] = {
     ),
     "undeclared_rub": Effect(
         name="undeclared_rub",
-        parameters=(Parameter("rub", 0.5, "contact stiffness of the casing beyond the clearance", 0.0),),
-        coefficients=("rub",),
+        parameters=(Parameter("sim_rub", 0.5, "contact stiffness of the casing beyond the clearance", 0.0),),
+        coefficients=("sim_rub",),
         columns=_rub_columns,
-        to_coefficients=_one("rub")[0],
-        from_coefficients=_one("rub")[1],
+        to_coefficients=_one("sim_rub")[0],
+        from_coefficients=_one("sim_rub")[1],
         moment="M_y + i M_x = -k_c max(|z| - gap, 0) (1 + i mu) z/|z|",
         cause="a rub: beyond a radial clearance the disk touches the casing (contact stiffness "
         "and friction against the turning surface)",
@@ -251,11 +251,11 @@ UNDECLARED: dict[str, Effect] = {
     ),
     "undeclared_loose": Effect(
         name="undeclared_loose",
-        parameters=(Parameter("loose", 0.4, "stiffness lost in y beyond the gap", 0.0, 1.0),),
-        coefficients=("loose",),
+        parameters=(Parameter("sim_loose", 0.4, "stiffness lost in y beyond the gap", 0.0, 1.0),),
+        coefficients=("sim_loose",),
         columns=_loose_columns,
-        to_coefficients=_one("loose")[0],
-        from_coefficients=_one("loose")[1],
+        to_coefficients=_one("sim_loose")[0],
+        from_coefficients=_one("sim_loose")[1],
         moment="M_y = kappa (th_y - clip(th_y, -gap, gap)),  M_x = 0",
         cause="a loose pedestal: beyond a clearance in y the support lifts off and its stiffness drops",
         signature="odd harmonics of the whirl (1x, 3x, ...), forward and backward alike "
@@ -325,7 +325,7 @@ def bow(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_up: Run
     0.014 at speed 1 for Table 1) cannot fit it at all speeds; a 1x forward residual
     remains, largest away from speed 1.
     """
-    return _faulty("undeclared_bow", {"bow": b, "bow_phase": gamma}, seed, noise, rotor, run_up, t_end, dt)
+    return _faulty("undeclared_bow", {"sim_bow": b, "sim_bow_phase": gamma}, seed, noise, rotor, run_up, t_end, dt)
 
 
 def forcing_2x(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_up: RunUp = RUN_UP,
@@ -340,7 +340,7 @@ def forcing_2x(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_
     (speed ``1/sqrt(4 - 2 ip)`` ≈ 0.54).  Neither the asymmetry (a 2x only with a static
     load) nor the quadratic stiffness (2x growing with amplitude²) describes it.
     """
-    values = {"f2": f, "f2_phase": gamma, "f2_back": f_back, "f2_back_phase": gamma_back}
+    values = {"sim_f2": f, "sim_f2_phase": gamma, "sim_f2_back": f_back, "sim_f2_back_phase": gamma_back}
     return _faulty("undeclared_2x", values, seed, noise, rotor, run_up, t_end, dt)
 
 
@@ -352,7 +352,7 @@ def forcing_3x(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_
     ``M_y + i M_x = f e^{i(3 phi + gamma)}``, constant amplitude.  Signature: order +3
     forward; no library effect has a 3x column.
     """
-    return _faulty("undeclared_3x", {"f3": f, "f3_phase": gamma}, seed, noise, rotor, run_up, t_end, dt)
+    return _faulty("undeclared_3x", {"sim_f3": f, "sim_f3_phase": gamma}, seed, noise, rotor, run_up, t_end, dt)
 
 
 def anisotropy(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_up: RunUp = RUN_UP,
@@ -367,7 +367,7 @@ def anisotropy(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_
     ``-D e^{2 i phi} conj(z)``, which keeps a synchronous response forward), nothing in the
     library has a backward synchronous column.
     """
-    return _faulty("undeclared_anisotropy", {"aniso": delta}, seed, noise, rotor, run_up, t_end, dt)
+    return _faulty("undeclared_anisotropy", {"sim_aniso": delta}, seed, noise, rotor, run_up, t_end, dt)
 
 
 def loose_pedestal(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_up: RunUp = RUN_UP,
@@ -383,7 +383,7 @@ def loose_pedestal(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, 
     3x), forward and backward alike since it acts along y only.  No library effect is piecewise linear
     or one-directional (the quadratic stiffness is even: 0x and 2x).
     """
-    return _faulty("undeclared_loose", {"loose": kappa}, seed, noise, rotor, run_up, t_end, dt)
+    return _faulty("undeclared_loose", {"sim_loose": kappa}, seed, noise, rotor, run_up, t_end, dt)
 
 
 def rub(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_up: RunUp = RUN_UP,
@@ -398,7 +398,7 @@ def rub(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_up: Run
     forward moment (a stiffening plus a cross-coupling) that comes and goes with the
     amplitude — a stiffness change fitted over the whole run is not constant in time.
     """
-    return _faulty("undeclared_rub", {"rub": k_contact}, seed, noise, rotor, run_up, t_end, dt)
+    return _faulty("undeclared_rub", {"sim_rub": k_contact}, seed, noise, rotor, run_up, t_end, dt)
 
 
 def probe_runout(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_up: RunUp = RUN_UP,

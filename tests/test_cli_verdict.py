@@ -1,7 +1,8 @@
 """The verdict's JSON contract, checked from outside: ``rotor-id diagnose FILE --json`` run
 as a separate process on files written to disk, as a user runs it.
 
-Files: a support anisotropy the library does not declare (``faults.anisotropy``), a
+Files: a 3x forcing the library does not declare (``faults.forcing_3x``), a support
+anisotropy it does (simulated by ``faults.anisotropy``'s own code), a
 healthy rotor with ip = 0.2 (the default used to be 0.3), the same healthy rotor with
 its time in seconds (natural frequency 40 Hz), and an all-zero record.
 """
@@ -39,6 +40,8 @@ def _diagnose(path: Path, *args: str) -> tuple[dict, str]:
 def files(tmp_path_factory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp("verdict")
     out = {}
+    out["3x"] = folder / "forcing_3x.csv"
+    F.forcing_3x(1, **F.FAST).to_file(out["3x"])
     out["anisotropy"] = folder / "anisotropy.csv"
     F.anisotropy(1, **F.FAST).to_file(out["anisotropy"])
     healthy = F.healthy(5, rotor=F.with_rotor(F.BASE, ip=0.2), **F.FAST)
@@ -60,15 +63,15 @@ def files(tmp_path_factory) -> dict[str, Path]:
 
 
 def test_undeclared_fault_json(files):
-    out, _ = _diagnose(files["anisotropy"], "--model", "unbalance,viscous_damping", "--ip", "0.3")
+    out, _ = _diagnose(files["3x"], "--model", "unbalance,viscous_damping", "--ip", "0.3")
     assert OLD_KEYS | NEW_KEYS <= set(out), sorted(OLD_KEYS | NEW_KEYS - set(out))
     assert out["verdict"] in ("partly_explained", "unexplained")
-    assert out["missing"] == []  # nothing from the library stands for an anisotropy
+    assert out["missing"] == []  # nothing from the library stands for a 3x forcing
     assert out["rms_ratio_after"] == pytest.approx(out["rms_after"] / out["noise_floor"])
     assert out["rms_ratio_after"] > 1.5
     top = out["unexplained"]["orders"][0]
     assert set(top) == {"order", "direction", "share"}
-    assert (top["order"], top["direction"]) == (1, "backward") and isinstance(top["order"], int)
+    assert (top["order"], top["direction"]) == (3, "forward") and isinstance(top["order"], int)
     assert 0.3 < top["share"] <= 1.0
     assert out["unexplained"]["bands"] and all(
         {"t_start", "t_end"} <= set(b) for b in out["unexplained"]["bands"])
@@ -76,10 +79,19 @@ def test_undeclared_fault_json(files):
     assert out["ip"] == 0.3
 
 
-def test_undeclared_fault_without_ip(files):
-    """Without ``--ip`` the estimate is used; the fault biases it (anisotropy: 0.23 for
-    0.3), and the result says the estimate is uncertain — the verdict stays honest."""
+def test_declared_fault_json(files):
+    """The anisotropy is named, with ip estimated (the widest model holds it: unbiased)."""
     out, _ = _diagnose(files["anisotropy"], "--model", "unbalance,viscous_damping")
+    assert out["verdict"] == "explained_after_adding" and out["missing"] == ["support_anisotropy"]
+    assert out["unexplained"] is None and out["rms_ratio_after"] <= 1.5
+    assert out["ip"] == pytest.approx(0.3, abs=0.01)
+    assert out["physical"]["support_anisotropy"] == pytest.approx(0.08, rel=0.05)
+
+
+def test_undeclared_fault_without_ip(files):
+    """Without ``--ip`` the estimate is used; a fault outside the library may bias it, and
+    the result says the estimate is uncertain — the verdict stays honest."""
+    out, _ = _diagnose(files["3x"], "--model", "unbalance,viscous_damping")
     assert out["ip"] == pytest.approx(min(max(out["ip_estimate"], 0.0), 0.95))
     assert out["verdict"] in ("partly_explained", "unexplained") and out["missing"] == []
     assert any("uncertain" in n for n in out["notes"]), out["notes"]

@@ -437,7 +437,7 @@ def test_a_growing_crack_is_a_change_not_an_appearance():
     """``rotor-id simulate --crack 250:0.08`` on the Table-1 rotor: D jumps from 0.03 to 0.08.
     The asymmetry is found with its onset, and with its value before and after."""
     res = diagnose(simulate(RotorParams(crack=Crack(250.0, 0.08)), noise=NOISE, seed=1), ip=0.3)
-    assert res.missing[0] == "asymmetry", res.summary()
+    assert "asymmetry" in res.missing, res.summary()
     assert abs(res.onset["asymmetry"] - 250.0) <= 25.0
     assert res.after.splits == ("asymmetry",)
     assert res.after.physical_before["D"] == pytest.approx(0.03, rel=0.05)

@@ -25,8 +25,8 @@ VOID = {"br", "img", "meta", "hr", "input", "link", "wbr"}
 
 
 @functools.cache
-def _bow():
-    return diagnose(F.bow(1, **F.FAST), model=F.BASE.model, ip=F.BASE.ip)
+def _outside_the_library():
+    return diagnose(F.forcing_3x(1, **F.FAST), model=F.BASE.model, ip=F.BASE.ip)
 
 
 @functools.cache
@@ -113,17 +113,17 @@ def _parse(path: Path) -> tuple[_Report, str]:
 
 
 def test_unexplained_run_shows_verdict_orders_and_rejected(tmp_path):
-    d = _bow()
+    d = _outside_the_library()
     assert d.verdict in ("unexplained", "partly_explained")
-    rep, text = _parse(d.report(tmp_path / "bow.html"))
+    rep, text = _parse(d.report(tmp_path / "forcing_3x.html"))
     assert rep.verdict_word == d.verdict
     assert "explains" in rep.section or "library does not hold" in rep.section  # the sentence
     assert f"{d.rms_ratio_after:.3g}" in rep.section  # final RMS over the floor
-    # the top order line of the unexplained residual: the bow whirls forward at 1x
+    # the top order line of the unexplained residual: a 3x forcing whirls forward at 3x
     assert {"orders", "bands", "rejected"} <= rep.in_verdict
     orders = rep.tables["orders"]
     assert orders[0][:2] == ["order", "whirl"]
-    assert orders[1][:2] == ["1x", "forward"]
+    assert orders[1][:2] == ["3x", "forward"]
     assert orders[1][2].endswith("%") and float(orders[1][2].rstrip(" %")) > 50
     bands = rep.tables["bands"][1:]
     assert len(bands) == len(d.unexplained["bands"]) > 0
@@ -154,7 +154,7 @@ def test_healthy_run_is_explained_without_order_lines(tmp_path):
 
 
 def test_strings_from_data_and_users_are_escaped(tmp_path):
-    d = copy.copy(_bow())  # a shallow copy: the lists below are replaced, not mutated
+    d = copy.copy(_outside_the_library())  # a shallow copy: the lists below are replaced, not mutated
     d.source = HOSTILE
     d.notes = [*d.notes, "<b>x</b>"]
     d.rejected = [*d.rejected, {"effect": HOSTILE, "rule": "<i>rule</i> & more"}]

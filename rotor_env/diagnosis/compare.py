@@ -172,6 +172,8 @@ class _Data:
             self.noise_gain = float(np.linalg.norm(sosfiltfilt(sos, impulse)))
         self.meas = filtered.slice_time(t_start, None)
         self.ip = ip
+        #: 95 % half-width of an ip estimated from the data (0: ip given)
+        self.ip_uncertainty = 0.0
         self.equation = equation
         self.data = np.ascontiguousarray(self.meas.data)
         self.raw_data = np.ascontiguousarray(self.raw.data)
@@ -307,7 +309,9 @@ def _free_run(comp: Comparison, data: _Data, known: dict) -> None:
             physical = {**comp.physical, **{k: v for k, v in comp.physical_before.items()}} \
                 if pending & set(comp.splits) else comp.physical
             params = _model_params(comp.model, physical, data.ip, known, pending - set(comp.splits))
-            seg = free_run(params, m.t[a : b + 1], m.phi[a : b + 1], m.phi_dot[a : b + 1], state)
+            # compiled once for the whole registry: every candidate model shares the kernel
+            seg = free_run(params, m.t[a : b + 1], m.phi[a : b + 1], m.phi_dot[a : b + 1], state,
+                           compiled_for=tuple(EFFECTS))
             pieces.append(seg.data if not pieces else seg.data[1:])
             state = tuple(seg.data[-1, 4:8])
     except SimulationError:

@@ -21,6 +21,11 @@ LIBRARY_CANDIDATES: tuple[str, ...] = (
     "structural_damping",
     "stiffness",
     "static_load",
+    "shaft_bow",
+    "support_anisotropy",
+    "cross_coupled_stiffness",
+    "misalignment",
+    "breathing_crack",
 )
 
 

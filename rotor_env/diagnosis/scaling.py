@@ -111,7 +111,7 @@ def _ip_fit(data: np.ndarray, effects: tuple[str, ...]):
 
 def estimate_ip_and_stiffness(meas: Measurements | np.ndarray, model: Sequence[str],
                               raw: np.ndarray | None = None, noise_gain: float = 1.0,
-                              candidates: Sequence[str] = ()) -> InertiaEstimate:
+                              candidates: Sequence[str] = (), widest: bool = True) -> InertiaEstimate:
     """``ip`` (HAC standard error, :mod:`identifier.hac`) and ``k`` from a fit of ``model``
     plus every library effect with ``ip`` and ``k`` unknown.
 
@@ -124,8 +124,10 @@ def estimate_ip_and_stiffness(meas: Measurements | np.ndarray, model: Sequence[s
         data = meas.data[amp > 0.1 * amp.max()] if amp.max() > 0 else meas.data
     else:
         data = np.asarray(meas, dtype=float)
-    widest = _widest(model, candidates)
-    spec, A, y = _ip_fit(data, widest)
+    # the time scale needs k alone: the widest model holds effects whose columns share the
+    # stiffness direction (a breathing crack's mean opening), which would make k ambiguous
+    effects = _widest(model, candidates) if widest else (*(e for e in model if e != "stiffness"), "stiffness")
+    spec, A, y = _ip_fit(data, effects)
     keep = np.linalg.norm(A, axis=0) > 0
     if not keep[0]:
         return InertiaEstimate(math.nan, math.inf, math.nan, math.inf)
@@ -137,7 +139,7 @@ def estimate_ip_and_stiffness(meas: Measurements | np.ndarray, model: Sequence[s
     k = float(theta[int(np.sum(keep[:k_col]))]) if keep[k_col] else math.nan
     ratio = math.nan
     if raw is not None:
-        _, A_raw, y_raw = _ip_fit(raw, widest)
+        _, A_raw, y_raw = _ip_fit(raw, effects)
         r_raw = y_raw - A_raw[:, keep] @ theta
         floor = math.sqrt(0.5 * (noise_floor(r_raw[0::2]) ** 2 + noise_floor(r_raw[1::2]) ** 2)) * noise_gain
         rms = float(np.sqrt(np.mean(resid * resid)))

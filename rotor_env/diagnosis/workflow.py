@@ -103,7 +103,7 @@ def diagnose(
         _validate_columns(EFFECTS[e], samples, 0.3 if ip is None else float(ip))
     try:
         check_excitation(measurements)
-        k_hat = estimate_ip_and_stiffness(measurements, model.effects, candidates=candidates).k
+        k_hat = estimate_ip_and_stiffness(measurements, model.effects, widest=False).k
         time_scale = 1.0
         if math.isfinite(k_hat) and not (K_RANGE[0] <= k_hat <= K_RANGE[1]):
             if k_hat <= 0:
@@ -140,6 +140,8 @@ def diagnose(
                              f"model leaves {est.rms_ratio:.1f}x the noise floor (a fault outside the "
                              "library biases that estimate)")
         data.ip = ip_used
+        # an estimated ip is uncertain: effects it could mimic are checked against that
+        data.ip_uncertainty = 1.96 * ip_se if ip is None else 0.0
     except NotIdentifiable as exc:
         return NotIdentifiableResult(source=measurements.source, reason=str(exc), ip=ip, notes=notes)
     pbar = None
@@ -155,6 +157,8 @@ def diagnose(
     steps: list[Comparison] = []
     remaining = list(candidates)
     while remaining and len(rounds) < max_rounds:
+        if floor > 0 and current.rms < floor:
+            break  # below the noise floor: nothing is left to explain (noise-free data: round-off)
         ranked = _rank(data, current, remaining, _known(current.model), alpha, min_fit_gain, min_energy_drop)
         rounds.append(ranked)
         if pbar is not None:
@@ -176,6 +180,9 @@ def diagnose(
         else _change_time(data, current, e, _known(current.model), alpha, min_energy_drop)
         for e in missing
     }
+    for e in missing:
+        if EFFECTS[e].caveat:
+            notes.append(f"{e}: {EFFECTS[e].caveat}")
     for comp in {id(c): c for c in (before, *steps, current)}.values():
         make_robust(data, comp, alpha)
     # the reported values: noise in the regressors biases c and h low (see .eiv)

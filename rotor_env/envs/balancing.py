@@ -13,7 +13,7 @@ class RotorBalancingEnv(RotorEnvBase):
 
     ## Description
 
-    The rotor of ``PHYSICS.md`` (a disk on a flexible shaft; dimensionless units with the
+    The rotor of ``docs/PHYSICS.md`` (a disk on a flexible shaft; dimensionless units with the
     nominal natural frequency ``sqrt(k) = 1``) is run up from rest with the prescribed
     constant spin acceleration ``spin_rate`` (default 0.01, the paper's run-up): by
     ``t_max = 250`` it reaches the speed 2.5, well past the critical speed

@@ -14,7 +14,7 @@ class RotorRunUpEnv(RotorEnvBase):
     ## Description
 
     A rigid disk on a flexible shaft (the Jeffcott-type rotor of Zhou & Shi 2004, see
-    ``PHYSICS.md``; dimensionless units in which the nominal natural frequency is
+    ``docs/PHYSICS.md``; dimensionless units in which the nominal natural frequency is
     ``sqrt(k) = 1``) starts at rest.  Its inclinations ``theta_x, theta_y`` are driven by
     the unbalance, which grows with the speed squared and resonates at the critical speed
     ``sqrt(k / (1 - ip))`` (0.84–1.70 for the randomised rotors).  The agent schedules the
