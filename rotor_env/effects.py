@@ -93,6 +93,8 @@ class Effect:
     dry_friction: the moment is set-valued (Coulomb): the simulator integrates it with a
         stick/slip switch model; the columns give its slipping direction.
     caveat: a lookalike the data cannot tell apart from it (reported when it is added).
+    lookalikes: library effects with a similar signature; when one of them is added the
+        diagnosis reports the evidence that decided between them.
     """
 
     name: str
@@ -108,6 +110,8 @@ class Effect:
     dry_friction: bool = False
     #: what these data cannot tell it from (said whenever the diagnosis adds it)
     caveat: str = ""
+    #: library effects that look like it (the diagnosis reports what told them apart)
+    lookalikes: tuple[str, ...] = ()
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -313,6 +317,7 @@ register_effect(
         cause="aerodynamic and other viscous losses, bearing and seal damping",
         signature="limits the resonance peak; residual at the whirl (1x near the critical speed)",
         orders=(1,),
+        lookalikes=('cross_coupled_stiffness',),
     )
 )
 register_effect(
@@ -332,6 +337,7 @@ register_effect(
         cause="the disk's principal axis is tilted against the shaft (dynamic unbalance)",
         signature="synchronous (1x) forcing growing with speed squared",
         orders=(1,),
+        lookalikes=('shaft_bow',),
     )
 )
 _to, _from = _identity(("D",))
@@ -350,6 +356,7 @@ register_effect(
         "a whirl at frequency w leaves order 2 - w/speed (a static side load: 2x, the crack's classic "
         "signature); synchronous response stays 1x",
         orders=(1, 2),
+        lookalikes=('breathing_crack', 'misalignment', 'support_anisotropy'),
     )
 )
 #: quadratic stiffness: at |theta| = 0.3 the quadratic moment stays below a third of the linear one
@@ -374,6 +381,7 @@ register_effect(
         cause="non-linear elastic restoring moment (a second-order polynomial from one potential)",
         signature="0x (a static offset) and 2x in the fixed frame, growing with amplitude squared",
         orders=(0, 2),
+        lookalikes=('stiffness', 'misalignment'),
     )
 )
 _to, _from = _identity(("h",))
@@ -411,6 +419,7 @@ register_effect(
         cause="the shaft's elastic restoring moment; 1 in the paper's units",
         signature="sets the critical speed sqrt(k); a wrong k leaves residual at the whirl",
         orders=(1,),
+        lookalikes=('nonlinear_stiffness', 'support_anisotropy'),
     )
 )
 _to, _from = _identity(("tau",))
@@ -474,6 +483,7 @@ register_effect(
         caveat="a probe runout (an out-of-round or marked probe track) leaves the same 1x pattern in the "
         "equations: one probe plane cannot tell it from a bow; compare with the runout measured on the "
         "track at slow roll, or with a second probe plane",
+        lookalikes=('unbalance',),
     )
 )
 _to, _from = _identity(("support_anisotropy",))
@@ -494,6 +504,7 @@ register_effect(
         "a backward (-1x) line, largest between the criticals; no 2x (a shaft asymmetry keeps 1x forward "
         "and shows 2x with a side load)",
         orders=(-1,),
+        lookalikes=('asymmetry',),
     )
 )
 _to, _from = _identity(("cross_coupling",))
@@ -511,8 +522,10 @@ register_effect(
         cause="fluid-film bearings, seals, aerodynamic (Alford) forces: a moment at right angles to the tilt",
         signature="feeds forward whirl: lowers the apparent damping of the forward mode (at a whirl w it "
         "acts as a damping -q/w) and destabilises it above q = c w; unlike damping it does not grow with "
-        "the whirl frequency",
-        orders=(1,),
+        "the whirl frequency; acts on whatever whirls (the 1x response, the free whirl at the natural "
+        "frequency), so it is not tied to a rotation order",
+        orders=(),
+        lookalikes=('viscous_damping',),
     )
 )
 register_effect(
@@ -538,6 +551,7 @@ register_effect(
         "every speed; weakly resonant where 2x meets a natural frequency (near half the critical). "
         "A crack's 2x needs a side load and grows with the static deflection",
         orders=(2, -2),
+        lookalikes=('asymmetry', 'breathing_crack', 'nonlinear_stiffness'),
     )
 )
 register_effect(
@@ -562,6 +576,7 @@ register_effect(
         signature="with a side load: 1x, 2x and 3x; resonances at 1/2 and 1/3 of the critical (sub-critical "
         "2x and 3x peaks); the always-open asymmetry has the 2x only",
         orders=(1, 2, 3),
+        lookalikes=('asymmetry', 'misalignment'),
     )
 )
 

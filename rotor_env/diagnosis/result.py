@@ -96,6 +96,8 @@ class Diagnosis(DiagnosisFigures):
     ip_standard_error: float = math.nan
     time_scale: float = 1.0               # t_model = time_scale * t_file
     notes: list[str] = field(default_factory=list)
+    #: per added effect: the evidence that told it from its lookalikes (see verdict.lookalike_evidence)
+    lookalikes: list[dict] = field(default_factory=list)
 
     @property
     def candidates(self) -> list[Candidate]:
@@ -150,6 +152,7 @@ class Diagnosis(DiagnosisFigures):
             "errors_in_variables_bias": (None if self.after.eiv_bias is None else dict(
                 zip(self.after.columns, map(float, self.after.eiv_bias), strict=True))),
             "notes": self.notes,
+            "lookalikes": self.lookalikes,
         }
 
     def to_json(self, **kwargs) -> str:
@@ -186,6 +189,18 @@ class Diagnosis(DiagnosisFigures):
                     note = f"  (appears at t ≈ {on:.0f})" if on is not None else "  (present throughout)"
                 lines.append(f"  + {e}{note}")
                 lines.append(f"      {EFFECTS[e].cause}")
+        for ev in self.lookalikes:
+            if not ev["lookalikes"]:
+                continue
+            lines.append(f"  {ev['effect']} told apart from its lookalikes:")
+            if ev["residual_orders"]:
+                lines.append("    the residual held " + ", ".join(
+                    f"{o['order']}x {o['direction']} {100 * o['share']:.0f} %" for o in ev["residual_orders"]))
+            if ev["residual_by_speed"]:
+                lines.append(f"    its {ev['residual_by_speed'][0]['order']}x line by speed: " + ", ".join(
+                    f"{b['speed_min']:.2g}-{b['speed_max']:.2g}: {b['amplitude']:.2g}" for b in ev["residual_by_speed"]))
+            for lk in ev["lookalikes"]:
+                lines.append(f"    - {lk['effect']}: {lk['status']}")
         if self.rejected:
             lines.append("candidates turned down:")
             lines += [f"  - {r['effect']}: {r['rule']}" for r in self.rejected]

@@ -126,7 +126,13 @@ def estimate_ip_and_stiffness(meas: Measurements | np.ndarray, model: Sequence[s
         data = np.asarray(meas, dtype=float)
     # the time scale needs k alone: the widest model holds effects whose columns share the
     # stiffness direction (a breathing crack's mean opening), which would make k ambiguous
-    effects = _widest(model, candidates) if widest else (*(e for e in model if e != "stiffness"), "stiffness")
+    if widest:
+        effects = _widest(model, candidates)
+    else:  # the forcing every rotor has (a model may leave the unbalance out: it is a candidate)
+        base = [e for e in (*model, "unbalance", "viscous_damping", "static_load") if e != "stiffness"]
+        if "unbalance_in_phase" in base:
+            base = [e for e in base if e != "unbalance"]
+        effects = (*dict.fromkeys(base), "stiffness")
     spec, A, y = _ip_fit(data, effects)
     keep = np.linalg.norm(A, axis=0) > 0
     if not keep[0]:

@@ -101,3 +101,52 @@ def describe_unexplained(data: _Data, comp: Comparison, floor: float) -> dict:
     bands, _ = failing_windows(m.t, per_sample, floor=floor, factor=FLOOR_RATIO, speed=m.phi_dot)
     bands.sort(key=lambda w: -w["peak_rms_over_floor"])
     return {"orders": order_lines(data, r), "bands": bands[:6]}
+
+
+def order_by_speed(data: _Data, residual: np.ndarray, order: float, bands: int = 3) -> list[dict]:
+    """Amplitude of the residual's line at ``order`` (signed: negative is backward) in
+    ``bands`` speed bands — how a missing effect scales with speed (a bow's 1x forcing is
+    constant, an unbalance's grows with speed squared)."""
+    m = data.meas
+    speeds, ords, amp = order_map(m.t, m.phi, m.phi_dot, complex_rows(residual, data.equation))
+    if not amp.size:
+        return []
+    col = int(np.argmin(np.abs(ords - order)))
+    lo, hi = float(np.min(speeds)), float(np.max(speeds))
+    edges = np.linspace(lo, hi, bands + 1)
+    out = []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        sel = (speeds >= a) & (speeds <= b)
+        if sel.any():
+            out.append({"speed_min": float(a), "speed_max": float(b), "order": order,
+                        "amplitude": float(np.sqrt(np.mean(amp[sel, col] ** 2)))})
+    return out
+
+
+def lookalike_evidence(data: _Data, base: Comparison, ranked: list, chosen) -> dict:
+    """Why ``chosen`` and not its lookalikes: the residual's order lines before adding it,
+    how its main order scales with speed, and each lookalike's test and rule."""
+    from ..effects import EFFECTS
+
+    eff = EFFECTS[chosen.effect]
+    by_name = {c.effect: c for c in ranked}
+    rows = []
+    for name in eff.lookalikes:
+        if name in base.model:
+            rows.append({"effect": name, "status": "in the model already: it leaves the misfit that "
+                         f"{chosen.effect} removes"})
+        elif name in by_name:
+            c = by_name[name]
+            status = c.rejected_by or (f"ranked below {chosen.effect} (log10 p {c.log10_p:.3g} vs "
+                                       f"{chosen.log10_p:.3g})")
+            rows.append({"effect": name, "log10_p": c.log10_p, "energy_drop": c.energy_drop,
+                         "fit_gain": c.fit_gain, "declared_orders": list(EFFECTS[name].orders), "status": status})
+    main = eff.orders[0] if eff.orders else None
+    return {
+        "effect": chosen.effect,
+        "declared_orders": list(eff.orders),
+        "log10_p": chosen.log10_p, "energy_drop": chosen.energy_drop, "fit_gain": chosen.fit_gain,
+        "residual_orders": order_lines(data, base.residual)[:4],
+        "residual_by_speed": order_by_speed(data, base.residual, main) if main is not None else [],
+        "lookalikes": rows,
+    }

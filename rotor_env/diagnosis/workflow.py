@@ -24,7 +24,7 @@ from .scaling import (
     estimate_ip_and_stiffness,
     rescale_time,
 )
-from .verdict import describe_unexplained, estimate_noise_floor, verdict_of
+from .verdict import describe_unexplained, estimate_noise_floor, lookalike_evidence, verdict_of
 
 #: a given ip further than this (and 5 standard errors) from the data's estimate is contradicted
 IP_TOLERANCE = 0.03
@@ -153,6 +153,7 @@ def diagnose(
     before = current
     floor = estimate_noise_floor(data, before)
     rounds: list[list[Candidate]] = []
+    lookalikes: list[dict] = []
     missing: list[str] = []
     steps: list[Comparison] = []
     remaining = list(candidates)
@@ -166,6 +167,9 @@ def diagnose(
         chosen = _choose(data, current, ranked, floor, alpha)
         if chosen is None:
             break
+        decided = lookalike_evidence(data, current, ranked, chosen)
+        chosen.checks["lookalikes"] = decided
+        lookalikes.append(decided)
         missing.append(chosen.effect)
         current = chosen.comparison
         if chosen.onset is not None:
@@ -207,6 +211,7 @@ def diagnose(
         else None,
         rejected=[{"effect": e, "rule": rule} for e, rule in rejected.items()],
         ip_estimate=ip_hat, ip_standard_error=ip_se, time_scale=time_scale, notes=notes,
+        lookalikes=lookalikes,
     )
 
 
