@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from .base import RotorEnvBase, _positive
 from .core import MODE_BALANCING
 
@@ -127,7 +129,11 @@ class RotorBalancingEnv(RotorEnvBase):
     * ``step_dt=0.5`` (500 steps), ``sensor_dt=0.01`` (50 samples per step),
       ``max_substep=0.01`` (>= 10 RK4 sub-steps per step are required).
     * ``w_vibration=1.0, w_effort=0.1, fail_penalty=None``: reward weights.
-    * ``return_measurements=True``: ``False`` leaves ``"measurements"`` out of ``info``.
+    * ``return_measurements=True``: ``False`` leaves ``"measurements"`` out of ``info``
+    * ``faults=None``: field faults drawn per episode with ``randomize=True``, effect ->
+      probability (``{"shaft_bow": 0.3, "support_anisotropy": 0.3}``; ranges in
+      :data:`rotor_env.envs.randomization.FAULT_RANGES`); ``info["params"].effects`` says
+      which the rotor has.
 
     ## Version History
 
@@ -154,6 +160,7 @@ class RotorBalancingEnv(RotorEnvBase):
         w_effort: float = 0.1,
         fail_penalty: float | None = None,
         return_measurements: bool = True,
+        faults: Mapping[str, float] | None = None,
     ) -> None:
         self.spin_rate = _positive("spin_rate", spin_rate)
         self.m_max = _positive("m_max", m_max)
@@ -175,4 +182,5 @@ class RotorBalancingEnv(RotorEnvBase):
             m_max=self.m_max,
             spin_rate=self.spin_rate,
             return_measurements=return_measurements,
+            faults=faults,
         )

@@ -37,9 +37,9 @@ from .core import (
     D_PHIDD,
     D_REASON,
     D_TTS,
+    ENV_EFFECTS,
     MODE_RUN_UP,
     N_CFG,
-    N_COEF,
     N_DYN,
     N_OBS,
     N_PAR,
@@ -49,10 +49,11 @@ from .core import (
     R_TIME_LIMIT,
     R_UNSTABLE,
     REASONS,
+    coef_layout,
     kernels,
     observe,
 )
-from .randomization import TABLE1, params_to_arrays, sample_params
+from .randomization import FAULT_RANGES, TABLE1, check_faults, params_to_arrays, sample_params
 from .rendering import EpisodeHistory, Renderer
 
 __all__ = ["MIN_SUBSTEPS", "RotorEnvBase"]
@@ -104,6 +105,7 @@ class RotorEnvBase(gym.Env[np.ndarray, np.ndarray]):
         spin_rate: float = 0.0,
         deadline: float = -1.0,
         return_measurements: bool = True,
+        faults: Mapping[str, float] | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
@@ -111,6 +113,10 @@ class RotorEnvBase(gym.Env[np.ndarray, np.ndarray]):
             )
         self.render_mode = render_mode
         self.randomize = bool(randomize)
+        #: field faults drawn per episode (effect -> probability); the kernel simulates them too
+        self.faults = check_faults(faults)
+        self._env_effects = (*ENV_EFFECTS, *(f for f in FAULT_RANGES if f in self.faults))
+        _, self._n_coef = coef_layout(self._env_effects)
         self.clearance = _positive("clearance", clearance)
         self.t_max = _positive("t_max", t_max)
         self.step_dt = _positive("step_dt", step_dt)
@@ -171,12 +177,12 @@ class RotorEnvBase(gym.Env[np.ndarray, np.ndarray]):
 
         self._state = np.zeros(4)
         self._dyn = self._initial_dyn()
-        self._coef = np.zeros(N_COEF)
+        self._coef = np.zeros(self._n_coef)
         self._par = np.zeros(N_PAR)
         self._params: RotorParams | None = None
         self._done = True
         self._buffer = np.empty((self.n_samples, N_COLUMNS))
-        self._kernels = kernels()
+        self._kernels = kernels(self._env_effects)
         self._step_one = None
         self._hist = EpisodeHistory() if render_mode is not None else None
         self._renderer = None
@@ -195,12 +201,12 @@ class RotorEnvBase(gym.Env[np.ndarray, np.ndarray]):
                 p = RotorParams.from_dict(p)
             return p
         if self.randomize:
-            return sample_params(rng)
+            return sample_params(rng, self.faults)
         return TABLE1
 
     def _load(self, params: RotorParams) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(state, dyn, coef, par)`` of a rotor at rest at t = 0."""
-        coef, par = params_to_arrays(params, self.sensor_dt)
+        coef, par = params_to_arrays(params, self.sensor_dt, self._env_effects)
         return np.zeros(4), self._initial_dyn(), coef, par
 
     @staticmethod

@@ -27,7 +27,7 @@ from numba import njit, prange
 from ..effects import PHYSICAL_EFFECTS
 from ..simulator import compile_accel, integrate, smooth_effects
 
-__all__ = ["ENV_EFFECTS", "N_COEF", "N_OBS", "REASONS", "kernels"]
+__all__ = ["ENV_EFFECTS", "N_COEF", "N_OBS", "REASONS", "coef_layout", "kernels"]
 
 #: The effects every environment rotor is built from (absent effects have coefficient 0).
 ENV_EFFECTS: tuple[str, ...] = PHYSICAL_EFFECTS
@@ -40,6 +40,19 @@ for _e in _SMOOTH:
     COEF_OFFSET[_e.name] = _j
     _j += len(_e.coefficients)
 IDX_D = COEF_OFFSET["asymmetry"]
+
+
+def coef_layout(effects: tuple[str, ...]) -> tuple[dict[str, int], int]:
+    """Offsets of each smooth effect's coefficients in ``coef`` for an effect set, and its
+    length.  The paper's effects come first in every set (the crack switches ``D`` at
+    :data:`IDX_D`), the field faults an environment draws follow."""
+    if tuple(effects[: len(ENV_EFFECTS)]) != ENV_EFFECTS:
+        raise ValueError("an environment's effects start with ENV_EFFECTS")
+    offsets, j = {}, 0
+    for e in smooth_effects(tuple(effects)):
+        offsets[e.name] = j
+        j += len(e.coefficients)
+    return offsets, j
 
 # dyn indices
 D_T, D_PHI, D_PHID, D_PHIDD, D_STEP, D_PEAK, D_EFFORT, D_TTS, D_CRACKED, D_REASON = range(10)

@@ -18,6 +18,20 @@ parameter                 distribution         notes
 ``k30, k21, k12, k03``    U(0, 0.06) each      present with probability 0.5 (together)
 ========================  ===================  ===========================================
 
+Field faults (``faults={"shaft_bow": 0.3, ...}``: effect -> probability; none by default,
+so the default draws are unchanged) are drawn after the table above, with a second single
+``rng.random`` call, from :data:`FAULT_RANGES`:
+
+==============================  =====================================================
+fault                           parameters
+==============================  =====================================================
+``shaft_bow``                   bow U(0.002, 0.01), phase U(-pi, pi)
+``support_anisotropy``          U(-0.08, 0.08)
+``cross_coupled_stiffness``     U(0, 0.01)  (below the damping: the rotor stays stable)
+``misalignment``                forward 2x U(0, 0.005), phase U(-pi, pi)
+``breathing_crack``             dk U(0.02, 0.1), depth U(0.5, 1), phase U(-pi, pi)
+==============================  =====================================================
+
 Absent effects are left out of :attr:`RotorParams.effects` (so ``info["params"]`` says
 which effects the rotor has); the simulation gives them coefficient 0.  The ranges keep
 the critical speed below the default operating speeds (2.0 run-up, 2.5 balancing) and the
@@ -27,24 +41,25 @@ dry-friction whirl (amplitude about ``0.85 h/c``) well inside the default cleara
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..params import RotorParams
+from ..simulator import smooth_effects
 from .core import (
-    _SMOOTH,
-    COEF_OFFSET,
     ENV_EFFECTS,
-    N_COEF,
     N_PAR,
     P_CRACK_D,
     P_CRACK_SAMPLE,
     P_H,
     P_IP,
+    coef_layout,
 )
 
-__all__ = ["PRESENCE", "RANGES", "ParamRange", "params_to_arrays", "sample_params"]
+__all__ = ["FAULT_RANGES", "PRESENCE", "RANGES", "ParamRange", "check_faults", "params_to_arrays",
+           "sample_params"]
 
 
 @dataclass(frozen=True)
@@ -77,10 +92,38 @@ PRESENCE: dict[str, float] = {
     "nonlinear_stiffness": 0.5,
 }
 _N_DRAWS = len(RANGES) + len(PRESENCE)
+#: the field faults an environment can draw, and their ranges
+FAULT_RANGES: dict[str, tuple[ParamRange, ...]] = {
+    "shaft_bow": (ParamRange("bow", 0.002, 0.01, "shaft_bow"),
+                  ParamRange("bow_phase", -math.pi, math.pi, "shaft_bow")),
+    "support_anisotropy": (ParamRange("support_anisotropy", -0.08, 0.08, "support_anisotropy"),),
+    "cross_coupled_stiffness": (ParamRange("cross_coupling", 0.0, 0.01, "cross_coupled_stiffness"),),
+    "misalignment": (ParamRange("misalignment", 0.0, 0.005, "misalignment"),
+                     ParamRange("misalignment_phase", -math.pi, math.pi, "misalignment")),
+    "breathing_crack": (ParamRange("dk_crack", 0.02, 0.1, "breathing_crack"),
+                        ParamRange("breathing_depth", 0.5, 1.0, "breathing_crack"),
+                        ParamRange("breathing_phase", -math.pi, math.pi, "breathing_crack")),
+}
 
 
-def sample_params(rng: np.random.Generator) -> RotorParams:
-    """Draw one rotor (see the module table); exactly one ``rng.random`` call."""
+def check_faults(faults: Mapping[str, float] | None) -> dict[str, float]:
+    """``faults`` validated: known field faults with probabilities in [0, 1]."""
+    out: dict[str, float] = {}
+    for name, p in dict(faults or {}).items():
+        if name not in FAULT_RANGES:
+            raise ValueError(f"faults: unknown field fault {name!r}; the environments draw "
+                             f"{', '.join(FAULT_RANGES)}")
+        p = float(p)
+        if not (math.isfinite(p) and 0.0 <= p <= 1.0):
+            raise ValueError(f"faults: the probability of {name!r} must be in [0, 1], got {p!r}")
+        out[name] = p
+    return out
+
+
+def sample_params(rng: np.random.Generator, faults: Mapping[str, float] | None = None) -> RotorParams:
+    """Draw one rotor (see the module table): one ``rng.random`` call, and one more for
+    the field faults when ``faults`` (effect -> probability) names any."""
+    faults = check_faults(faults)
     u = rng.random(_N_DRAWS).tolist()
     present = {e: u[len(RANGES) + i] < p for i, (e, p) in enumerate(PRESENCE.items())}
     ip = 0.3
@@ -92,6 +135,19 @@ def sample_params(rng: np.random.Generator) -> RotorParams:
         elif present.get(r.effect, True):
             values[r.name] = v
     effects = tuple(e for e in ENV_EFFECTS if present.get(e, True))
+    if faults:
+        names = list(FAULT_RANGES)  # a fixed order: the draw does not depend on the dict's
+        wanted = [f for f in names if f in faults]
+        v = rng.random(len(wanted) + sum(len(FAULT_RANGES[f]) for f in wanted)).tolist()
+        k = len(wanted)
+        for f in wanted:
+            here = v[wanted.index(f)] < faults[f]
+            for r in FAULT_RANGES[f]:
+                if here:
+                    values[r.name] = r.low + (r.high - r.low) * v[k]
+                k += 1
+            if here:
+                effects = (*effects, f)
     return RotorParams(ip=ip, values=values, effects=effects)
 
 
@@ -99,23 +155,26 @@ def sample_params(rng: np.random.Generator) -> RotorParams:
 TABLE1 = RotorParams()
 
 
-def params_to_arrays(params: RotorParams, sensor_dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(coef, par)`` kernel arrays of a rotor (absent effects get coefficient 0).
+def params_to_arrays(params: RotorParams, sensor_dt: float,
+                     effects: tuple[str, ...] = ENV_EFFECTS) -> tuple[np.ndarray, np.ndarray]:
+    """``(coef, par)`` kernel arrays of a rotor for an environment simulating ``effects``
+    (absent effects get coefficient 0).
 
     The crack (if any) switches ``D`` from the sample ``round(crack.time / sensor_dt)`` on.
     """
     if not isinstance(params, RotorParams):
         raise ValueError(f"options['params'] must be a RotorParams, got {type(params).__name__}")
-    extra = [e for e in params.effects if e not in ENV_EFFECTS]
+    extra = [e for e in params.effects if e not in effects]
     if extra:
         raise ValueError(
-            f"the environments simulate the effects {', '.join(ENV_EFFECTS)}; "
-            f"the rotor has unsupported effect(s) {', '.join(extra)}"
+            f"this environment simulates the effects {', '.join(effects)}; "
+            f"the rotor has unsupported effect(s) {', '.join(extra)} (field faults: faults={{...}})"
         )
-    coef = np.zeros(N_COEF)
-    for e in _SMOOTH:
+    offsets, n_coef = coef_layout(tuple(effects))
+    coef = np.zeros(n_coef)
+    for e in smooth_effects(tuple(effects)):
         if e.name in params.effects:
-            j = COEF_OFFSET[e.name]
+            j = offsets[e.name]
             c = params.coefficients(e.name)
             coef[j : j + len(c)] = c
     par = np.empty(N_PAR)

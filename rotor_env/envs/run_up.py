@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from .base import RotorEnvBase, _positive
 from .core import MODE_RUN_UP
 
@@ -151,6 +153,10 @@ class RotorRunUpEnv(RotorEnvBase):
       ``target_speed / a_max``); ``None``: no deadline, minimum-time reward.
     * ``w_vibration=1.0, w_time=1.0, w_effort=0.1, fail_penalty=None``: reward weights.
     * ``return_measurements=True``: ``False`` leaves ``"measurements"`` out of ``info``
+    * ``faults=None``: field faults drawn per episode with ``randomize=True``, effect ->
+      probability (``{"shaft_bow": 0.3, "support_anisotropy": 0.3}``; ranges in
+      :data:`rotor_env.envs.randomization.FAULT_RANGES`); ``info["params"].effects`` says
+      which the rotor has
       (a little faster, for pure RL training).
 
     ## Version History
@@ -182,6 +188,7 @@ class RotorRunUpEnv(RotorEnvBase):
         deadline: float | None = 200.0,
         fail_penalty: float | None = None,
         return_measurements: bool = True,
+        faults: Mapping[str, float] | None = None,
     ) -> None:
         self.target_speed = _positive("target_speed", target_speed)
         self.a_max = _positive("a_max", a_max)
@@ -209,4 +216,5 @@ class RotorRunUpEnv(RotorEnvBase):
             a_max=self.a_max,
             deadline=-1.0 if self.deadline is None else self.deadline,
             return_measurements=return_measurements,
+            faults=faults,
         )

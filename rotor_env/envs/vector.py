@@ -53,7 +53,6 @@ from .core import (
     D_REASON,
     D_TTS,
     MODE_RUN_UP,
-    N_COEF,
     N_DYN,
     N_OBS,
     N_PAR,
@@ -110,7 +109,7 @@ class _RotorVectorEnv(VectorEnv):
         self._cfg = tpl._cfg
         self._states = np.zeros((n, 4))
         self._dyn = np.zeros((n, N_DYN))
-        self._coef = np.zeros((n, N_COEF))
+        self._coef = np.zeros((n, tpl._n_coef))
         self._par = np.zeros((n, N_PAR))
         self._u = np.zeros((n, 2))
         self._params = np.full(n, None, dtype=object)
