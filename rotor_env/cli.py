@@ -263,7 +263,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     meas, user = _load(args)
     model = _model_list(args.model, DEFAULT_MODEL)
     candidates = [c for c in (*LIBRARY_CANDIDATES, *user) if c not in model]
-    result = diagnose(meas, model, candidates=candidates, ip=args.ip, alpha=args.alpha,
+    result = diagnose(meas, model, candidates=candidates, ip=args.ip, alpha=args.alpha, slow_roll=args.slow_roll,
                       progress=sys.stderr.isatty() and not args.json)
     if args.figures:
         result.save_figures(args.figures)
@@ -342,6 +342,8 @@ def _add_diagnose_parsers(sub) -> None:
         p.add_argument("--json", action="store_true", help="print the result as one JSON object")
         if cmd == "diagnose":
             p.add_argument("--alpha", type=float, default=0.05, help="significance level (default 0.05)")
+            p.add_argument("--slow-roll", type=float, default=None, metavar="SPEED",
+                           help="subtract the probe runout read below this speed (slow-roll compensation)")
             p.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
             p.add_argument("--figures", metavar="DIR", help="write the figures (PNG) to this folder")
             p.add_argument("--force", action="store_true", help="overwrite --report / --figures")

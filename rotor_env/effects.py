@@ -481,8 +481,8 @@ register_effect(
         "turning with the shaft), resonant at the critical; the unbalance's forcing grows with speed^2",
         orders=(1,),
         caveat="a probe runout (an out-of-round or marked probe track) leaves the same 1x pattern in the "
-        "equations: one probe plane cannot tell it from a bow; compare with the runout measured on the "
-        "track at slow roll, or with a second probe plane",
+        "equations: one probe plane cannot tell it from a bow; if the 1x at slow roll is runout, subtract it "
+        "(diagnose --slow-roll SPEED) and diagnose again, or compare with a second probe plane",
         lookalikes=('unbalance',),
     )
 )

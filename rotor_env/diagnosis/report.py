@@ -62,8 +62,14 @@ class DiagnosisFigures:
             top.set_xlabel("speed")
         return fig
 
-    def plot_order_map(self, ax=None, which: str = "before"):
-        """Residual spectrum in rotation orders against speed, 0x/1x/2x marked."""
+    def plot_order_map(self, ax=None, which: str = "before", lookalikes: int = 2):
+        """Residual spectrum in rotation orders against speed, 0x/1x/2x marked.
+
+        Each added effect's declared (signed) orders are drawn as solid vertical lines
+        labelled with its name in the legend; the orders of up to ``lookalikes`` of its
+        lookalikes (those not added themselves) dashed.  An effect that declares no
+        order line gets a legend entry saying so.
+        """
         fig, ax = self._ax(ax)
         comp = self.before if which == "before" else self.after
         m = self.data.meas
@@ -74,10 +80,48 @@ class DiagnosisFigures:
         for o in (-2, -1, 0, 1, 2):
             ax.axvline(o, color="w", lw=0.6, ls=":")
             ax.text(o, speeds.max() if amp.size else 1, f"{o}x", color="k", ha="center", va="bottom", fontsize=8)
+        lines = self._expected_lines(lookalikes)
+        for i, (name, declared, kind) in enumerate(lines):
+            colour = _LINE_COLOURS[i % len(_LINE_COLOURS)]
+            style = ({"ls": "-", "lw": 1.6, "alpha": 0.95} if kind == "added"
+                     else {"ls": "--", "lw": 1.1, "alpha": 0.85})
+            label = name if kind == "added" else f"{name} (lookalike)"
+            if not declared:  # no order line: said in the legend, nothing drawn on the map
+                ax.plot([], [], color=colour, label=f"{label}: no order line", **style)
+                continue
+            for j, o in enumerate(declared):
+                ax.axvline(o, color=colour, label=label if j == 0 else None, **style)
+        if lines:
+            # below the axes (and their order label), so the map stays unhidden
+            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=min(3, len(lines)),
+                      title="expected order lines (solid: added, dashed: lookalike)", title_fontsize=7)
         ax.set_xlabel("rotation order (+ forward, - backward)")
         ax.set_ylabel("speed")
         ax.set_title(f"order map of the {which}-model residual")
         return fig
+
+    def _expected_lines(self, lookalikes: int = 2) -> list[tuple[str, tuple[float, ...], str]]:
+        """``(effect, signed orders, "added" | "lookalike")`` for each added effect and up to
+        ``lookalikes`` of its lookalikes per effect (each effect once; the added first)."""
+        evidence = {ev.get("effect"): ev for ev in (getattr(self, "lookalikes", None) or [])}
+        out, seen = [], set()
+        for name in self.missing:
+            ev = evidence.get(name) or {}
+            declared = ev.get("declared_orders")
+            out.append((name, tuple(_declared_orders(name) if declared is None else declared), "added"))
+            seen.add(name)
+        for name in self.missing:
+            ev = evidence.get(name) or {}
+            shown = 0
+            for lk in ev.get("lookalikes") or []:
+                other = lk.get("effect")
+                if shown >= lookalikes or other in seen:
+                    continue
+                declared = lk.get("declared_orders")
+                out.append((other, tuple(_declared_orders(other) if declared is None else declared), "lookalike"))
+                seen.add(other)
+                shown += 1
+        return out
 
     def plot_autocorrelation(self, ax=None, which: str = "before", max_lag: int = 400):
         """Residual autocorrelation with 95 % bounds for white noise."""
@@ -222,6 +266,63 @@ class DiagnosisFigures:
         parts.append("</section>")
         return "\n".join(parts)
 
+    def _lookalikes_html(self) -> str:
+        """The section "Told apart from its lookalikes": for every added effect that has
+        lookalikes, its declared orders, the residual's order lines before it was added,
+        its main order's amplitude by speed band and each lookalike's status.  Empty where
+        no added effect has a lookalike.  Every string is escaped."""
+        evidence = [ev for ev in (getattr(self, "lookalikes", None) or []) if ev.get("lookalikes")]
+        if not evidence:
+            return ""
+        parts = ["<section id='lookalikes' class='lookalikes'>", "<h2>Told apart from its lookalikes</h2>"]
+        for ev in evidence:
+            name = ev.get("effect", "")
+            declared = ev.get("declared_orders") or []
+            parts.append(f"<div class='lookalike-evidence' data-effect='{_e(name)}'>")
+            parts.append(f"<h3>{_e(name)}</h3>")
+            parts.append(
+                f"<p class='declared'>Added: <b>{_e(name)}</b>; it declares the order lines "
+                f"{_e(_signed_orders(declared))} (log10 p {_num(ev.get('log10_p'), '.4g')}, removes "
+                f"{_pct(ev.get('energy_drop'), '.1f')} of the equation error, free-run fit "
+                f"{_num(ev.get('fit_gain'), '+.1f')} points).</p>")
+            orders = ev.get("residual_orders") or []
+            if orders:
+                rows = "".join(
+                    f"<tr><td>{_e(_order(o.get('order')))}</td><td>{_e(o.get('direction', ''))}</td>"
+                    f"<td>{_pct(o.get('share'), '.0f')}</td></tr>"
+                    for o in orders
+                )
+                parts.append("<p>The residual before adding it, by rotation order:</p>"
+                             "<table class='lookalike-orders'><tr><th>order</th><th>whirl</th>"
+                             f"<th>share of the energy above the noise</th></tr>{rows}</table>")
+            else:
+                parts.append("<p>No single rotation-order line stood out in the residual before adding it.</p>")
+            by_speed = ev.get("residual_by_speed") or []
+            if by_speed:
+                main = by_speed[0].get("order")
+                rows = "".join(
+                    f"<tr><td>{_num(b.get('speed_min'), '.3g')}&ndash;{_num(b.get('speed_max'), '.3g')}</td>"
+                    f"<td>{_num(b.get('amplitude'), '.3g')}</td></tr>"
+                    for b in by_speed
+                )
+                parts.append(f"<p>Amplitude of its main line ({_e(_signed_orders([main]))}) in the residual, "
+                             "by speed band:</p>"
+                             "<table class='lookalike-speed'><tr><th>speed band</th><th>amplitude</th></tr>"
+                             f"{rows}</table>")
+            rows = "".join(
+                f"<tr><td>{_e(lk.get('effect', ''))}</td><td>{_e(lk.get('status', ''))}</td>"
+                f"<td>{_num(lk.get('log10_p'), '.4g')}</td>"
+                f"<td>{_pct(lk.get('energy_drop'), '.2g')}</td>"
+                f"<td>{_e(_signed_orders(lk['declared_orders'])) if lk.get('declared_orders') is not None else '-'}"
+                "</td></tr>"
+                for lk in ev.get("lookalikes") or []
+            )
+            parts.append("<table class='lookalike-status'><tr><th>lookalike</th><th>status</th><th>log10 p</th>"
+                         f"<th>energy drop</th><th>declared orders</th></tr>{rows}</table>")
+            parts.append("</div>")
+        parts.append("</section>")
+        return "\n".join(parts)
+
     def report(self, path: str | Path, *, overwrite: bool = False) -> Path:
         """A self-contained HTML report (figures embedded as PNG)."""
         import matplotlib.pyplot as plt
@@ -273,6 +374,7 @@ p.verdict-word{{font-size:2em;font-weight:bold;margin:.2em 0}}
 .verdict-partly_explained p.verdict-word{{color:#d98a00}}.verdict-unexplained p.verdict-word{{color:#c0392b}}img{{max-width:100%}}pre{{background:#f4f4f4;padding:.5em}}</style></head><body>
 <h1>rotor-id diagnosis</h1>
 {self._verdict_html()}
+{self._lookalikes_html()}
 <h2>Summary</h2>
 <p>Data: {html.escape(str(self.source))}; ip = {self.ip:g}; alpha = {self.alpha:g}; informative window t &ge; {self.t_start:g}.</p>
 <p>Starting model: {_e(', '.join(self.start_model))}. Missing: {missing}. Final model: {_e(', '.join(self.model))}.</p>
@@ -290,6 +392,40 @@ p.verdict-word{{font-size:2em;font-weight:bold;margin:.2em 0}}
 <pre>{html.escape(self.summary())}</pre>
 </body></html>"""
         return atomic_write_text(path, doc, overwrite=overwrite)
+
+
+#: colours of the expected order lines on the order map (visible on viridis)
+_LINE_COLOURS = ("#e41a1c", "#ff7f00", "#f781bf", "#000000", "#00e5ff", "#a65628")
+
+
+def _declared_orders(name) -> tuple:
+    """The signed rotation orders the library declares for effect ``name`` (``()`` if unknown)."""
+    from ..effects import EFFECTS
+
+    eff = EFFECTS.get(name)
+    return tuple(getattr(eff, "orders", ()) or ()) if eff is not None else ()
+
+
+def _signed_orders(orders) -> str:
+    """Signed rotation orders in words: ``+2x forward, -2x backward``; ``none`` for none."""
+    words = []
+    for o in orders or []:
+        try:
+            v = float(o)
+        except (TypeError, ValueError):
+            words.append(str(o))
+            continue
+        words.append("0x static" if v == 0 else f"{v:+g}x {'forward' if v > 0 else 'backward'}")
+    return ", ".join(words) or "none"
+
+
+def _pct(x, fmt: str) -> str:
+    """A fraction as a percentage (``12.5 %``); ``-`` where there is none (None, NaN)."""
+    try:
+        v = 100 * float(x)
+    except (TypeError, ValueError):
+        return "-"
+    return f"{format(v, fmt)} %" if math.isfinite(v) else "-"
 
 
 def _e(x) -> str:

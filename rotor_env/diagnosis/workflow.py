@@ -10,6 +10,7 @@ import numpy as np
 
 from ..effects import EFFECTS, get_effect
 from ..measurements import Measurements
+from ..slow_roll import compensate_slow_roll
 from .candidates import Candidate, _appears_or_changes, _change_time, _rank
 from .checks import check_candidate
 from .compare import Comparison, _Data, _known, compare, make_robust
@@ -76,6 +77,7 @@ def diagnose(
     t_start: float | None = None,
     max_rounds: int = 6,
     progress: bool = False,
+    slow_roll: float | None = None,
 ) -> Diagnosis | NotIdentifiableResult:
     """Compare ``model`` with the measurements, rank and add the missing effects, judge.
 
@@ -84,6 +86,8 @@ def diagnose(
     the caller).  ``ip=None`` estimates the inertia ratio from the data; a given one
     that the data contradict is kept, with a warning.  A record that cannot decide
     anything returns a :class:`NotIdentifiableResult` (verdict ``not_identifiable``).
+    ``slow_roll``: a speed (the file's units) below which the 1x reading is the probe's
+    runout; its pattern is subtracted first (:mod:`rotor_env.slow_roll`).
     """
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha!r}")
@@ -97,6 +101,10 @@ def diagnose(
     if "unbalance_in_phase" in model:
         candidates = [c for c in candidates if c != "unbalance"]
     notes: list[str] = []
+    if slow_roll is not None:
+        measurements, runout = compensate_slow_roll(measurements, slow_roll)
+        notes.append(f"slow-roll vector subtracted (speed <= {slow_roll:g}): runout {abs(runout):.4g} at "
+                     f"{math.atan2(runout.imag, runout.real):.3f} rad (theta_y + i theta_x)")
     # a user effect whose columns are broken is said before anything uses them
     samples = np.ascontiguousarray(measurements.data)
     for e in (*model, *candidates):
