@@ -163,9 +163,12 @@ def test_bow_lookalike_is_unbalance_already_in_the_model(tmp_path):
 def test_misalignment_lookalikes_are_ranked_below(tmp_path):
     rep, _ = _parse(_forcing_2x().report(tmp_path / "forcing_2x.html"))
     (status,) = rep.tables["lookalike-status"]
-    rows = {row[0]: row[1] for row in status[1:]}
+    rows = {row[0]: row for row in status[1:]}
     assert set(rows) == {"asymmetry", "breathing_crack", "nonlinear_stiffness"}
-    assert all(s.startswith("ranked below misalignment") or s for s in rows.values())
+    for name, row in rows.items():  # each was tested: a status, its log10 p, energy drop and orders
+        assert row[1] and all(cell != "-" for cell in row[2:]), row
+        assert row[3].endswith("%")
+        assert row[4].startswith("0x static" if EFFECTS[name].orders[0] == 0 else "+")
 
 
 def test_healthy_report_has_no_lookalike_section(tmp_path):
