@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import csv
 import difflib
+import math
 import os
 from pathlib import Path
 
@@ -185,9 +186,66 @@ def load_measurements(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> M
     for j, c in enumerate(COLUMNS):
         if c in idx:
             out[:, j] = data[:, idx[c]]
+    notes = _check_units(path, out, idx, lines)
     for c, (src, order) in DERIVABLE.items():
         if c not in idx:
             out[:, COLUMNS.index(c)] = derive_rates(t, out[:, COLUMNS.index(src)], order)
     derived = [c for c in DERIVABLE if c not in idx]
-    note = f" (estimated: {', '.join(derived)})" if derived else ""
+    if derived:
+        notes.append(f"estimated: {', '.join(derived)}")
+    note = f" ({'; '.join(notes)})" if notes else ""
     return Measurements(out, source=f"{path}{note}")
+
+
+#: an inclination beyond this (1 rad, 57 deg) is not a shaft's tilt: degrees, or another quantity
+MAX_TILT = 1.0
+#: a spin angle whose rate disagrees with phi_dot by this factor or more is in another unit
+RATE_MISMATCH = 3.0
+
+
+def _check_units(path: Path, out: np.ndarray, idx: dict, lines) -> list[str]:
+    """Plausibility of the angle columns (in place: a wrapped ``phi`` is unwrapped).
+
+    An encoder reports ``phi`` wrapped to [0, 2 pi) or (-pi, pi]: a sampled spin angle
+    never moves by more than pi between samples (that would alias), so jumps beyond pi in
+    a column that stays within one turn are wraps, and are undone.  Degrees are refused
+    with the column named: ``phi`` whose rate is 57x ``phi_dot``, or wrapped to [0, 360);
+    inclinations beyond 1 rad.
+    """
+    notes: list[str] = []
+    j_phi = COLUMNS.index("phi")
+    phi = out[:, j_phi]
+    t = out[:, 0]
+    jumps = np.abs(np.diff(phi)) > math.pi
+    span = float(phi.max() - phi.min())
+    if jumps.any():
+        r = int(np.argmax(jumps)) + 1
+        if span <= 2 * math.pi + 1e-6:
+            out[:, j_phi] = np.unwrap(phi)
+            notes.append("phi unwrapped (it was wrapped to one turn)")
+        elif span <= 360.0 + 1e-6 and float(np.max(np.abs(np.diff(phi)))) > 300.0:
+            raise MeasurementError(f"{path}, line {lines[r]}, column 'phi': wrapped to 360 ({phi[r - 1]!r} -> "
+                                   f"{phi[r]!r}): the spin angle is in degrees; convert it to radians")
+        else:
+            raise MeasurementError(f"{path}, line {lines[r]}, column 'phi': jumps from {phi[r - 1]!r} to {phi[r]!r} "
+                                   "between two samples (more than half a turn: the angle is aliased or not in "
+                                   "radians)")
+    if "phi_dot" in idx:
+        rate = np.gradient(out[:, j_phi], t)
+        given = out[:, COLUMNS.index("phi_dot")]
+        moving = np.abs(given) > 0.05 * max(float(np.max(np.abs(given))), 1e-300)
+        if moving.sum() > 10:
+            ratio = float(np.median(rate[moving] / given[moving]))
+            if not (1.0 / RATE_MISMATCH < abs(ratio) < RATE_MISMATCH):
+                unit = " (degrees: 57.3)" if abs(abs(ratio) - 180.0 / math.pi) < 5.0 else ""
+                raise MeasurementError(f"{path}, column 'phi': its rate is {ratio:.4g}x column 'phi_dot'{unit}: "
+                                       "phi must be in radians and phi_dot in radians per time unit of 't'")
+    for c in ("theta_x", "theta_y"):
+        col = out[:, COLUMNS.index(c)]
+        big = np.abs(col) > MAX_TILT
+        if big.any():
+            r = int(np.argmax(big))
+            raise MeasurementError(f"{path}, line {lines[r]}, column {c!r}: value {col[r]!r} is beyond "
+                                   f"{MAX_TILT:g} rad ({math.degrees(MAX_TILT):.0f} deg), not a shaft's tilt: "
+                                   "degrees? (inclinations are in radians)")
+    return notes

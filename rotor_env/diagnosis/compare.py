@@ -154,6 +154,8 @@ class _Data:
         dt = float(np.median(np.diff(meas.t)))
         # the prefilter is for sensor noise: a record without any (a simulation) keeps its samples
         noisy = _white_level(meas.theta_x) + _white_level(meas.theta_y) > NOISE_DETECTION * float(amp.max())
+        #: the record carries sensor noise (a simulation without noise does not)
+        self.noisy = bool(noisy)
         self.cutoff = prefilter_cutoff(meas.phi_dot, dt) if prefilter and noisy and len(meas) > 60 else None
         self.noise_gain = 1.0
         self.sos = None

@@ -166,8 +166,8 @@ def diagnose(
     steps: list[Comparison] = []
     remaining = list(candidates)
     while remaining and len(rounds) < max_rounds:
-        if floor > 0 and current.rms < floor:
-            break  # below the noise floor: nothing is left to explain (noise-free data: round-off)
+        if floor > 0 and current.rms < floor and not data.noisy:
+            break  # noise-free data below the numerical floor: what is left is round-off
         ranked = _rank(data, current, remaining, _known(current.model), alpha, min_fit_gain, min_energy_drop)
         rounds.append(ranked)
         if pbar is not None:
