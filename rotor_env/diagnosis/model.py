@@ -153,6 +153,14 @@ def load_user_effect(spec: str) -> Effect:
     if obj is None:
         raise ValueError(f"--effect {spec}: module {mod_name!r} has no attribute {attr!r}")
     effect = obj if isinstance(obj, Effect) else effect_from_function(obj, attr)
+    from .. import PACKAGE_EFFECTS  # the library as the package ships it (import-time snapshot)
+
+    if effect.name in PACKAGE_EFFECTS and PACKAGE_EFFECTS[effect.name] is not effect:
+        # a plug-in must not silently replace a library effect: every later diagnosis in
+        # the process would use the plug-in's physics under the library's name
+        raise ValueError(f"--effect {spec}: the name {effect.name!r} is a library effect; give the plug-in "
+                         "another name")
+    # loading the same plug-in twice replaces the earlier copy
     return register_effect(effect, replace=True)
 
 
