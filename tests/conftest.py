@@ -98,3 +98,15 @@ def ref() -> SimpleNamespace:
 @pytest.fixture()
 def rng() -> np.random.Generator:
     return np.random.default_rng(20240611)
+
+
+@pytest.fixture
+def restore_effect_registry():
+    """Restore the effect registry after a test: user effects registered by it must not
+    leak into other tests (xdist may run another module's tests in this process next)."""
+    from rotor_env.effects import EFFECTS
+
+    saved = dict(EFFECTS)
+    yield
+    EFFECTS.clear()
+    EFFECTS.update(saved)

@@ -27,13 +27,8 @@ JEFFCOTT = RotorParams().replace(D=0.0, k30=0.0, k21=0.0, k12=0.0, k03=0.0, h=0.
 CANDIDATE_KEYS = {"effect", "F", "log10_p", "rms_after", "fit_percent_after"}
 
 
-@pytest.fixture(autouse=True)
-def _effect_library():
-    """``--effect`` registers effects in this process: restore the registry afterwards."""
-    saved = dict(EFFECTS)
-    yield
-    EFFECTS.clear()
-    EFFECTS.update(saved)
+# user effects registered here must not leak into other tests (conftest.py)
+pytestmark = pytest.mark.usefixtures("restore_effect_registry")
 
 
 @pytest.fixture(scope="module")

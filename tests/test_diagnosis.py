@@ -56,14 +56,8 @@ HIDDEN = {
 }
 
 
-@pytest.fixture(autouse=True)
-def _effect_library():
-    """Restore the effect registry after each test: user effects must not leak into
-    other tests (xdist may run another module's tests in this process next)."""
-    saved = dict(EFFECTS)
-    yield
-    EFFECTS.clear()
-    EFFECTS.update(saved)
+# user effects registered here must not leak into other tests (conftest.py)
+pytestmark = pytest.mark.usefixtures("restore_effect_registry")
 
 
 @cache

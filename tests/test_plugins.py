@@ -8,13 +8,8 @@ import pytest
 from rotor_env.diagnosis import load_user_effect
 from rotor_env.effects import EFFECTS
 
-
-@pytest.fixture(autouse=True)
-def _restore_registry():
-    saved = dict(EFFECTS)
-    yield
-    EFFECTS.clear()
-    EFFECTS.update(saved)
+# user effects registered here must not leak into other tests (conftest.py)
+pytestmark = pytest.mark.usefixtures("restore_effect_registry")
 
 
 def test_plugin_shadowing_a_library_effect_is_refused(tmp_path):
