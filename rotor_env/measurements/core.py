@@ -96,7 +96,7 @@ class Measurements:
         (:func:`rotor_env.outputs.atomic_write`): an interrupted write leaves no
         truncated file that would load cleanly.
         """
-        from .outputs import atomic_write
+        from ..outputs import atomic_write
 
         path = Path(path)
         if path.suffix == ".parquet":
