@@ -30,7 +30,7 @@ from scipy.signal import savgol_filter
 
 from .measurements import COLUMNS, Measurements
 
-__all__ = ["REQUIRED", "MeasurementError", "derive_rates", "load_measurements"]
+__all__ = ["REQUIRED", "MeasurementError", "derive_rates", "load_measurements", "read_table"]
 
 REQUIRED: tuple[str, ...] = ("t", "phi", "theta_x", "theta_y")
 #: derived column -> (source column, derivative order)
@@ -115,6 +115,20 @@ def _read_parquet(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
     data = np.column_stack(cols) if cols else np.empty((0, 0))
     # "line" of row r: r + 2, as if the table were a CSV file with a header line
     return header, data, np.arange(data.shape[0], dtype=np.int64) + 2
+
+
+def read_table(path: str | os.PathLike) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Header, float data and the file line of every data row of a CSV or Parquet file.
+
+    The generic reader behind every table the package loads (measurements, order-tracked
+    vectors, rig waveforms): errors name the file, line and column.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise MeasurementError(f"{path}: no such file")
+    if path.is_dir():
+        raise MeasurementError(f"{path}: is a directory, not a data file")
+    return _read_parquet(path) if path.suffix == ".parquet" else _read_csv(path)
 
 
 def derive_rates(t: np.ndarray, x: np.ndarray, order: int, window: float = 0.2) -> np.ndarray:

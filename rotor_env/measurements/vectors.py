@@ -1,0 +1,295 @@
+"""Order tracking and order-tracked vector tables (1X, 2X, ... against speed).
+
+Phase conventions
+-----------------
+A vector ``X`` at order ``n`` describes the part of a probe's signal that turns ``n``
+times per revolution.  Two conventions are in use and both are read and written:
+
+* ``lead`` (mathematical): ``x = Re(X e^{i n phi})`` — the angle of ``X`` leads the
+  keyphasor; this is the package's internal convention.
+* ``lag`` (instrument, Bently/ADRE, API 670): ``x = A cos(n phi - phase)`` — the phase
+  is the angle from the keyphasor pulse to the next positive peak, counted *against*
+  the rotation; ``phase_lag = -angle(X)`` (wrapped to [0, 360) degrees).
+
+``phi`` is the spin angle, zero at each keyphasor pulse.
+
+Order tracking
+--------------
+:func:`order_track` computes, for each block of whole revolutions, the Fourier
+coefficient in the shaft angle
+
+    X_n = (1 / (pi R)) * integral over R revolutions of x(phi) e^{-i n phi} d phi
+
+(trapezoidal rule in ``phi``, so a sweep's changing speed needs no resampling).  For
+``x = Re(X e^{i n phi})`` it returns ``X`` exactly; other orders average out over whole
+revolutions.  The block's speed is its angle over its duration, its time the middle.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "AMPLITUDE_UNITS",
+    "OrderTrack",
+    "VectorTable",
+    "VectorTableError",
+    "from_phase",
+    "load_vector_table",
+    "order_track",
+    "to_phase",
+]
+
+#: amplitude unit -> metres (V and mV need a sensitivity; see the rig description)
+AMPLITUDE_UNITS: dict[str, float] = {"um": 1e-6, "µm": 1e-6, "mil": 25.4e-6, "mm": 1e-3, "m": 1.0}
+#: speed unit -> rad/s
+SPEED_UNITS: dict[str, float] = {"rpm": 2.0 * math.pi / 60.0, "rad/s": 1.0, "hz": 2.0 * math.pi}
+
+
+class VectorTableError(ValueError):
+    """An order-tracked vector table that cannot be used as it is."""
+
+
+def to_phase(vectors: np.ndarray, convention: str = "lag") -> tuple[np.ndarray, np.ndarray]:
+    """Complex vectors (``lead`` convention) -> amplitude and phase in degrees of ``convention``."""
+    _check_convention(convention)
+    amp = np.abs(vectors)
+    ang = np.degrees(np.angle(vectors))
+    return amp, (np.mod(-ang, 360.0) if convention == "lag" else ang)
+
+
+def from_phase(amp: np.ndarray, phase_deg: np.ndarray, convention: str = "lag") -> np.ndarray:
+    """Amplitude and phase (degrees, ``convention``) -> complex vectors in the ``lead`` convention."""
+    _check_convention(convention)
+    ang = np.radians(phase_deg)
+    return np.asarray(amp, dtype=float) * np.exp(-1j * ang if convention == "lag" else 1j * ang)
+
+
+def _check_convention(convention: str) -> None:
+    if convention not in ("lag", "lead"):
+        raise ValueError(f"phase convention must be 'lag' or 'lead', got {convention!r}")
+
+
+@dataclass(frozen=True)
+class OrderTrack:
+    """Order-tracked vectors of one or more signals: one row per block of revolutions."""
+
+    t: np.ndarray  #: time of each block's middle
+    speed: np.ndarray  #: mean speed of each block (rad per time unit of ``t``)
+    vectors: dict[int, np.ndarray]  #: order -> complex (rows,) or (rows, signals), lead convention
+
+
+def order_track(
+    t: np.ndarray,
+    x: np.ndarray,
+    phi: np.ndarray,
+    orders: tuple[int, ...] = (1,),
+    revolutions: int = 1,
+    *,
+    at: np.ndarray | None = None,
+) -> OrderTrack:
+    """Per-revolution Fourier coefficients of ``x`` (1-D, or 2-D with a signal per column).
+
+    Blocks are ``revolutions`` whole turns of ``phi`` starting at multiples of 2 pi
+    (the keyphasor), one after the other; or, with ``at`` (angles), centred on each of
+    those angles.  Blocks that do not fit in the record are left out.
+    """
+    t = np.asarray(t, dtype=float)
+    phi = np.asarray(phi, dtype=float)
+    x = np.asarray(x)
+    one = x.ndim == 1
+    xs = x[:, None] if one else x
+    if len(t) != len(phi) or len(t) != xs.shape[0]:
+        raise ValueError("t, x and phi must have the same number of samples")
+    if revolutions < 1:
+        raise ValueError(f"revolutions must be >= 1, got {revolutions}")
+    span = 2.0 * math.pi * revolutions
+    if at is None:
+        first = math.ceil(phi[0] / (2.0 * math.pi)) * 2.0 * math.pi
+        starts = np.arange(first, phi[-1] - span + 1e-12, span)
+    else:
+        starts = np.asarray(at, dtype=float) - 0.5 * span
+        starts = starts[(starts >= phi[0]) & (starts + span <= phi[-1])]
+    stops = starts + span
+    i0 = np.searchsorted(phi, starts)
+    i1 = np.searchsorted(phi, stops)
+    t_mid = np.empty(len(starts))
+    speed = np.empty(len(starts))
+    out = {n: np.empty((len(starts), xs.shape[1]), dtype=complex) for n in orders}
+    for b, (a, e, lo, hi) in enumerate(zip(starts, stops, i0, i1, strict=True)):
+        # the block's samples plus its two ends, interpolated in phi
+        ph = np.concatenate(([a], phi[lo:hi], [e]))
+        tt = np.interp(ph, phi, t)
+        seg = np.empty((len(ph), xs.shape[1]), dtype=xs.dtype)
+        for j in range(xs.shape[1]):
+            seg[:, j] = np.interp(ph, phi, xs[:, j].real) + (
+                1j * np.interp(ph, phi, xs[:, j].imag) if np.iscomplexobj(xs) else 0.0)
+        dphi = np.diff(ph)
+        for n in orders:
+            f = seg * np.exp(-1j * n * ph)[:, None]
+            out[n][b] = np.sum(0.5 * (f[1:] + f[:-1]) * dphi[:, None], axis=0) / (math.pi * revolutions)
+        t_mid[b] = 0.5 * (tt[0] + tt[-1])
+        speed[b] = span / (tt[-1] - tt[0])
+    if one:
+        out = {n: v[:, 0] for n, v in out.items()}
+    return OrderTrack(t_mid, speed, out)
+
+
+# ------------------------------------------------------------------ vector tables
+@dataclass(frozen=True)
+class VectorTable:
+    """An order-tracked start-up or coast-down: speed rows, vectors per probe and order.
+
+    ``speed`` in rad/s, ``t`` in s (``None`` when the table has no time column),
+    ``vectors[n]`` a complex ``(rows, probes)`` array in the ``lead`` convention and in
+    ``amp_unit``; ``angles`` the probes' mounting angles (rad, from the reference in the
+    direction of rotation; ``None`` when unknown: each probe is then fitted on its own).
+    """
+
+    speed: np.ndarray
+    t: np.ndarray | None
+    probes: tuple[str, ...]
+    vectors: dict[int, np.ndarray]
+    amp_unit: str = "um"
+    angles: np.ndarray | None = None
+    source: str = ""
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def rpm(self) -> np.ndarray:
+        return self.speed / SPEED_UNITS["rpm"]
+
+    def to_csv(self, path: str | os.PathLike, phase: str = "lag", *, overwrite: bool = False) -> None:
+        """Write the table as CSV (``t``, ``rpm``, then ``NAME_amp``/``NAME_phase_deg`` per probe and order)."""
+        from ..outputs import atomic_write
+
+        cols = ["rpm"] if self.t is None else ["t", "rpm"]
+        data = [self.rpm] if self.t is None else [self.t, self.rpm]
+        for n in sorted(self.vectors):
+            suffix = "" if n == 1 else f"_{n}x"
+            for j, p in enumerate(self.probes):
+                amp, ph = to_phase(self.vectors[n][:, j], phase)
+                prefix = "" if len(self.probes) == 1 else f"{p}_"
+                cols += [f"{prefix}amp{suffix}", f"{prefix}phase_deg{suffix}"]
+                data += [amp, ph]
+        arr = np.column_stack(data)
+
+        def write(tmp: Path) -> None:
+            with open(tmp, "w", newline="", encoding="utf-8") as fh:
+                w = csv.writer(fh)
+                w.writerow(cols)
+                for row in arr:
+                    w.writerow([repr(float(v)) for v in row])
+
+        atomic_write(Path(path), write, overwrite=overwrite)
+
+
+def load_vector_table(
+    path: str | os.PathLike,
+    *,
+    amp_unit: str = "um",
+    phase: str = "lag",
+    speed_unit: str = "rpm",
+    angles: dict[str, float] | None = None,
+) -> VectorTable:
+    """Read an order-tracked table: ``rpm`` (or ``speed``), optional ``t``, and per probe
+    ``amp``/``phase_deg`` (one probe) or ``NAME_amp``/``NAME_phase_deg``; 2X and 3X as
+    ``..._amp_2x``/``..._phase_deg_2x``.  ``angles``: probe name -> mounting angle in
+    degrees (from the rig description).  Errors name the file, column, line and value.
+    """
+    from ..io import MeasurementError, read_table
+
+    path = Path(path)
+    _check_convention(phase)
+    if amp_unit not in AMPLITUDE_UNITS:
+        raise VectorTableError(f"--amp-unit {amp_unit!r}: not one of {', '.join(AMPLITUDE_UNITS)} "
+                               "(volts: convert with the probe sensitivity in the rig description)")
+    try:
+        header, data, lines = read_table(path)
+    except MeasurementError as exc:
+        raise VectorTableError(str(exc)) from None
+    header = [h.strip() for h in header]
+    lower = [h.lower() for h in header]
+    speed_col = next((c for c in ("rpm", "speed_rpm", "speed") if c in lower), None)
+    if speed_col is None:
+        raise VectorTableError(f"{path}: no speed column: expected 'rpm' (found columns {header})")
+    unit = "rpm" if speed_col != "speed" else speed_unit
+    col = {h.lower(): i for i, h in enumerate(header)}
+    probes: dict[str, dict[int, tuple[int, int]]] = {}
+    for h in lower:
+        for n, suffix in ((1, ""), (2, "_2x"), (3, "_3x"), (1, "_1x")):
+            tail = f"amp{suffix}"
+            if h == tail or h.endswith("_" + tail):
+                name = h[: -len(tail)].rstrip("_") or "probe"
+                ph = (h[: -len(tail)] + f"phase_deg{suffix}")
+                if ph not in col:
+                    raise VectorTableError(f"{path}: column {header[col[h]]!r} has no phase column {ph!r}")
+                probes.setdefault(name, {})[n] = (col[h], col[ph])
+    if not probes:
+        raise VectorTableError(f"{path}: no amplitude columns: expected 'amp' and 'phase_deg' "
+                               f"(or NAME_amp, NAME_phase_deg per probe); found {header}")
+    if any(1 not in v for v in probes.values()):
+        bad = next(k for k, v in probes.items() if 1 not in v)
+        raise VectorTableError(f"{path}: probe {bad!r} has no 1X columns ({bad}_amp, {bad}_phase_deg)")
+    if data.shape[0] < 8:
+        raise VectorTableError(f"{path}: only {data.shape[0]} rows; an order-tracked run needs at least 8 speeds")
+    used = [col[speed_col]] + [i for v in probes.values() for pair in v.values() for i in pair]
+    t_idx = col.get("t", col.get("time", col.get("time_s")))
+    if t_idx is not None:
+        used.append(t_idx)
+    for j in used:
+        bad = ~np.isfinite(data[:, j])
+        if bad.any():
+            r = int(np.argmax(bad))
+            raise VectorTableError(f"{path}, line {lines[r]}, column {header[j]!r}: value {data[r, j]!r} is not finite")
+    speed = data[:, col[speed_col]] * SPEED_UNITS[unit]
+    if (speed <= 0).any():
+        r = int(np.argmax(speed <= 0))
+        raise VectorTableError(f"{path}, line {lines[r]}, column {header[col[speed_col]]!r}: speed "
+                               f"{data[r, col[speed_col]]!r} is not positive")
+    for name, v in probes.items():
+        amp = data[:, v[1][0]]
+        if (amp < 0).any():
+            r = int(np.argmax(amp < 0))
+            raise VectorTableError(f"{path}, line {lines[r]}, column {header[v[1][0]]!r}: amplitude {amp[r]!r} "
+                                   "is negative")
+    notes: list[str] = []
+    t = None
+    if t_idx is not None:
+        t = data[:, t_idx].astype(float)
+        step = np.diff(t)
+        if (step <= 0).any():
+            r = int(np.argmax(step <= 0)) + 1
+            raise VectorTableError(f"{path}, line {lines[r]}, column {header[t_idx]!r}: time {t[r]!r} does not "
+                                   f"increase (previous {t[r - 1]!r})")
+    else:
+        order = np.argsort(speed, kind="stable")
+        if not (np.all(np.diff(speed) > 0) or np.all(np.diff(speed) < 0)):
+            raise VectorTableError(f"{path}: without a time column the speeds must rise (start-up) or fall "
+                                   "(coast-down) row by row")
+        del order
+        notes.append("no time column: the synchronous response is taken as quasi-steady")
+    names = tuple(probes)
+    vectors = {}
+    for n in sorted({n for v in probes.values() for n in v}):
+        arr = np.full((data.shape[0], len(names)), np.nan + 0j)
+        for j, name in enumerate(names):
+            if n in probes[name]:
+                a, p = probes[name][n]
+                arr[:, j] = from_phase(data[:, a], data[:, p], phase) * 1.0
+        vectors[n] = arr
+    ang = None
+    if angles is not None:
+        missing = [p for p in names if p not in angles]
+        if missing:
+            raise VectorTableError(f"{path}: probe(s) {missing} of the table are not in the rig description "
+                                   f"(it has {sorted(angles)})")
+        ang = np.radians([angles[p] for p in names])
+    return VectorTable(speed=speed, t=t, probes=names, vectors=vectors, amp_unit=amp_unit, angles=ang,
+                       source=str(path), notes=tuple(notes))
