@@ -1,0 +1,739 @@
+"""The plots rotordynamics engineers read: Bode, polar, orbits, waterfall, Campbell, tracks.
+
+Every function takes plain arrays (dimensionless runs and rig data in engineering units
+alike), returns a matplotlib ``Figure`` and accepts ``ax=`` (a pair of axes for the
+two-panel plots).  Units are labels the caller states: ``speed_unit`` is ``"rpm"``,
+``"Hz"``, ``"rad/s"`` or ``"dimensionless"`` (the model's time unit, radians per time
+unit); where a speed is *computed* from ``t`` and ``phi`` (orbits, waterfall), ``t`` is in
+seconds for ``rpm``/``Hz``/``rad/s`` and in the model's unit for ``dimensionless``.
+
+Conventions (docs/PHYSICS.md 1.2): ``z = th_y + i th_x``; a component ``e^{i n phi}`` is
+at rotation order ``n`` (forward for ``n > 0``); the horizontal probe/angle is ``th_y``,
+the vertical ``th_x``, so a forward whirl turns counter-clockwise in the orbit plot of a
+shaft turning with ``phi`` increasing.
+
+Vectors (1X, 2X ...) are complex numbers in the **lead** convention: a real channel
+``x ≈ Re(X e^{i n phi})`` (``phi`` from the keyphasor; ``phi = 0`` at the mark).  The
+**lag** convention of instruments, ``x = A cos(n phi - lag)``, has ``lag = -angle(X)``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .orders import order_map
+
+__all__ = [
+    "ParameterTracks",
+    "frequency_from_rad",
+    "order_vectors",
+    "parameter_tracks",
+    "phase_deg",
+    "plot_bode",
+    "plot_campbell",
+    "plot_orbit",
+    "plot_parameter_tracks",
+    "plot_polar",
+    "plot_waterfall",
+    "speed_from_rad",
+    "whirl_frequencies",
+]
+
+#: speed unit -> factor from rad per time unit (t in s for the engineering units)
+SPEED_FACTORS: dict[str, float] = {"rpm": 60.0 / (2 * math.pi), "Hz": 1.0 / (2 * math.pi), "rad/s": 1.0,
+                                   "dimensionless": 1.0}
+#: speed unit -> (frequency unit of its Campbell/waterfall axis, factor from rad per time unit)
+FREQUENCY_UNITS: dict[str, tuple[str, float]] = {"rpm": ("Hz", 1.0 / (2 * math.pi)),
+                                                 "Hz": ("Hz", 1.0 / (2 * math.pi)),
+                                                 "rad/s": ("rad/s", 1.0),
+                                                 "dimensionless": ("dimensionless", 1.0)}
+
+
+def _unit(speed_unit: str) -> str:
+    if speed_unit not in SPEED_FACTORS:
+        raise ValueError(f"speed_unit must be one of {', '.join(SPEED_FACTORS)}, got {speed_unit!r}")
+    return speed_unit
+
+
+def speed_from_rad(omega: np.ndarray | float, speed_unit: str) -> np.ndarray:
+    """A spin speed in rad per time unit (rad/s for the engineering units) in ``speed_unit``."""
+    return np.asarray(omega, dtype=float) * SPEED_FACTORS[_unit(speed_unit)]
+
+
+def frequency_from_rad(w: np.ndarray | float, speed_unit: str) -> np.ndarray:
+    """A whirl frequency in rad per time unit in the frequency unit that goes with
+    ``speed_unit`` (Hz for rpm and Hz, rad/s, dimensionless)."""
+    return np.asarray(w, dtype=float) * FREQUENCY_UNITS[_unit(speed_unit)][1]
+
+
+def _freq_per_speed(speed_unit: str) -> float:
+    """Frequency (in the axis's frequency unit) of order 1 at speed 1 (in ``speed_unit``)."""
+    return FREQUENCY_UNITS[_unit(speed_unit)][1] / SPEED_FACTORS[speed_unit]
+
+
+def _label(quantity: str, unit: str | None) -> str:
+    if not unit or unit == "dimensionless":
+        return f"{quantity} (dimensionless)"
+    return f"{quantity} ({unit})"
+
+
+def _axes(ax, n: int, figsize=(8, 4), **kw):
+    """``(figure, [axes])``: the caller's axes (one, or a sequence of ``n``) or a new figure
+    with ``n`` rows."""
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        fig, axes = plt.subplots(n, 1, figsize=figsize, squeeze=False, **kw)
+        return fig, list(axes[:, 0])
+    axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
+    if len(axes) != n:
+        raise ValueError(f"this plot draws on {n} axes; got {len(axes)}")
+    return axes[0].figure, axes
+
+
+# ------------------------------------------------------------------ order tracking
+def _keyphasor_times(t: np.ndarray, phi: np.ndarray, revolutions: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """``(times, angles)`` where ``phi`` crosses a multiple of ``2 pi`` (the keyphasor mark),
+    every ``revolutions`` turns, interpolated between samples; counted with the rotation
+    (a shaft turning backwards crosses them downwards)."""
+    sign = 1.0 if phi[-1] >= phi[0] else -1.0
+    psi = np.maximum.accumulate(sign * phi)  # monotone: brief reversals held (encoder noise)
+    step = 2 * math.pi * revolutions
+    first = math.ceil(psi[0] / (2 * math.pi) - 1e-12) * 2 * math.pi
+    marks = np.arange(first, psi[-1] + 1e-12, step)
+    if marks.size == 0:
+        return np.empty(0), np.empty(0)
+    # psi may hold flat stretches: interpolate on the strictly increasing samples
+    keep = np.concatenate([[True], np.diff(psi) > 0])
+    return np.interp(marks, psi[keep], t[keep]), sign * marks
+
+
+def order_vectors(
+    t: np.ndarray, x: np.ndarray, phi: np.ndarray, orders: Sequence[int] = (1,), revolutions: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray, dict[int, np.ndarray]]:
+    """Per-revolution order-tracked vectors: ``(t_mid, speed, {order: X})``.
+
+    Between consecutive keyphasor marks (``phi`` a multiple of ``2 pi``, every
+    ``revolutions`` turns) the samples are fitted by least squares with a constant and
+    the ``orders``: a real channel as ``x ≈ a0 + sum_n Re(X_n e^{i n phi})`` (the lead
+    convention), a complex one (``z = th_y + i th_x``) as ``z ≈ a0 + sum_n X_n e^{i n phi}``
+    with signed orders (``-1``: backward).  The fit uses the sampled ``phi`` itself, so an
+    accelerating shaft (samples not uniform in angle) is exact for a signal made of these
+    orders; for whole revolutions it is the DFT against ``phi``.  ``speed`` is the mean
+    speed of each revolution, ``2 pi revolutions / (t_b - t_a)`` in rad per time unit;
+    ``t_mid`` the middle of it.  A block with too few samples gives NaN.
+    """
+    t = np.asarray(t, dtype=float)
+    phi = np.asarray(phi, dtype=float)
+    x = np.asarray(x)
+    real = not np.iscomplexobj(x)
+    orders = [int(o) for o in orders]
+    if real and any(o <= 0 for o in orders):
+        raise ValueError(f"a real channel has positive orders only, got {orders}")
+    times, marks = _keyphasor_times(t, phi, revolutions)
+    n_blocks = max(len(times) - 1, 0)
+    out = {o: np.full(n_blocks, np.nan + 0j) for o in orders}
+    t_mid = 0.5 * (times[1:] + times[:-1]) if n_blocks else np.empty(0)
+    speed = np.abs(np.diff(marks)) / np.diff(times) if n_blocks else np.empty(0)
+    bounds = np.searchsorted(t, times)
+    n_cols = 1 + (2 if real else 1) * len(orders)
+    for j in range(n_blocks):
+        a, b = bounds[j], bounds[j + 1]
+        if b - a < n_cols + 2:
+            continue
+        ph, xs = phi[a:b], x[a:b]
+        if real:
+            cols = [np.ones(b - a)]
+            for o in orders:
+                cols += [np.cos(o * ph), -np.sin(o * ph)]  # Re(X e^{i o phi}) = Re X cos - Im X sin
+            coef, *_ = np.linalg.lstsq(np.column_stack(cols), xs, rcond=None)
+            for q, o in enumerate(orders):
+                out[o][j] = coef[1 + 2 * q] + 1j * coef[2 + 2 * q]
+        else:
+            A = np.column_stack([np.ones(b - a)] + [np.exp(1j * o * ph) for o in orders if o != 0])
+            coef, *_ = np.linalg.lstsq(A, xs.astype(complex), rcond=None)
+            q = 1
+            for o in orders:
+                if o == 0:
+                    out[o][j] = coef[0]
+                else:
+                    out[o][j] = coef[q]
+                    q += 1
+    return t_mid, speed, out
+
+
+def phase_deg(X: np.ndarray, convention: str = "lag", *, unwrap: bool = True,
+              min_relative_amplitude: float = 0.02) -> np.ndarray:
+    """Phase of vectors ``X`` (lead convention, ``x = Re(X e^{i phi})``) in degrees.
+
+    ``lead``: ``angle(X)``; ``lag``: the instrument convention ``x = A cos(phi - lag)``,
+    ``lag = -angle(X)``.  With ``unwrap`` the phase runs on continuously through the run
+    (a resonance turns it by 180 deg, two by 360), the first point in [0, 360), as long
+    as it stays within [-180, 540]: beyond, the 1X vector is circling (the free whirl
+    beating against 1X after a fast passage), not turning with a resonance, and those
+    values are shown modulo 360.  Without ``unwrap`` every value is in [0, 360).  Vectors
+    below ``min_relative_amplitude`` of the largest carry no phase (noise): NaN there.
+    """
+    if convention not in ("lag", "lead"):
+        raise ValueError(f"phase convention must be 'lag' or 'lead', got {convention!r}")
+    X = np.asarray(X, dtype=complex)
+    amp = np.abs(X)
+    ok = np.isfinite(X) & (amp > min_relative_amplitude * np.nanmax(amp)) if np.any(np.isfinite(X)) else \
+        np.zeros(X.shape, bool)
+    ang = np.angle(X)
+    ang = -ang if convention == "lag" else ang
+    out = np.full(X.shape, np.nan)
+    if not ok.any():
+        return out
+    deg = np.degrees(np.unwrap(ang[ok]) if unwrap else ang[ok])
+    if unwrap:
+        deg = deg - 360.0 * math.floor(deg[0] / 360.0)
+        wild = (deg < -180.0) | (deg > 540.0)
+        deg[wild] = np.mod(deg[wild], 360.0)
+    else:
+        deg = np.mod(deg, 360.0)
+    out[ok] = deg
+    return out
+
+
+# ------------------------------------------------------------------ Bode and polar
+_SOURCE_STYLES = ({"ls": "--", "lw": 1.0}, {"ls": ":", "lw": 1.6}, {"ls": "-.", "lw": 1.0})
+
+
+def _curves(measured: Mapping[str, np.ndarray], models: Mapping[str, Mapping[str, np.ndarray]] | None):
+    """``(label, channel index, style, X)`` of every curve: colour per channel, line style
+    per source (measured solid and thick)."""
+    channels = list(measured)
+    for m in (models or {}).values():
+        channels += [c for c in m if c not in channels]
+    out = [(f"{c}: measured", channels.index(c), {"ls": "-", "lw": 1.8}, np.asarray(X))
+           for c, X in measured.items()]
+    for k, (name, vecs) in enumerate((models or {}).items()):
+        for c, X in vecs.items():
+            out.append((f"{c}: {name}", channels.index(c), _SOURCE_STYLES[k % len(_SOURCE_STYLES)], np.asarray(X)))
+    return out
+
+
+def plot_bode(
+    speed: np.ndarray,
+    measured: Mapping[str, np.ndarray],
+    models: Mapping[str, Mapping[str, np.ndarray]] | None = None,
+    *,
+    speed_unit: str = "rpm",
+    amp_unit: str = "µm",
+    phase: str = "lag",
+    order: int = 1,
+    ax=None,
+):
+    """Bode plot: amplitude ``|X|`` (top) and phase (bottom) against speed.
+
+    ``measured``: channel -> complex vectors (lead convention) at ``speed``; ``models``:
+    model name (``"starting model"``, ``"final model"``) -> channel -> vectors at the
+    same speeds.  ``phase`` is ``lag`` (instrument, ``x = A cos(phi - lag)``, 0..360 deg
+    unwrapped through the run) or ``lead`` (``angle(X)``).  ``ax``: a pair of axes.
+    """
+    fig, (a_amp, a_ph) = _axes(ax, 2, figsize=(8, 5.5), sharex=True)
+    speed = np.asarray(speed, dtype=float)
+    for label, ch, style, X in _curves(measured, models):
+        colour = f"C{ch}"
+        a_amp.plot(speed, np.abs(X), color=colour, label=label, **style)
+        a_ph.plot(speed, phase_deg(X, phase), color=colour, **style)
+    a_amp.set_ylabel(_label(f"{order}X amplitude", amp_unit))
+    a_ph.set_ylabel(f"{order}X phase {phase} (deg)")
+    a_ph.set_xlabel(_label("speed", speed_unit))
+    a_amp.legend(fontsize=7, ncol=2)
+    a_amp.set_title(f"Bode plot ({order}X, phase {phase}: "
+                    + ("x = A cos(φ - lag))" if phase == "lag" else "x = Re(X e^{iφ}))"))
+    a_ph.yaxis.set_major_locator(_degree_locator())
+    return fig
+
+
+def _degree_locator():
+    from matplotlib.ticker import MaxNLocator
+
+    return MaxNLocator(nbins=8, steps=[1, 2, 4.5, 9, 10])  # multiples of 45/90 deg where it can
+
+
+def plot_polar(
+    speed: np.ndarray,
+    measured: Mapping[str, np.ndarray],
+    models: Mapping[str, Mapping[str, np.ndarray]] | None = None,
+    *,
+    speed_unit: str = "rpm",
+    amp_unit: str = "µm",
+    phase: str = "lag",
+    n_labels: int = 5,
+    order: int = 1,
+    ax=None,
+):
+    """Polar (Nyquist) plot: the vectors ``X`` in the complex plane, speed along the curve.
+
+    The point is ``X`` itself (``|X|`` at ``angle(X)``); the angle scale drawn around it
+    reads in the chosen convention: ``lead`` counter-clockwise from the right, ``lag``
+    clockwise (phase lag grows against the rotation, as instruments draw it).  Speeds are
+    written at ``n_labels`` points of each measured curve.
+    """
+    fig, (ax,) = _axes(ax, 1, figsize=(6, 6))
+    speed = np.asarray(speed, dtype=float)
+    r_max = 0.0
+    for label, ch, style, X in _curves(measured, models):
+        ok = np.isfinite(X)
+        ax.plot(X.real[ok], X.imag[ok], color=f"C{ch}", label=label, **style)
+        r_max = max(r_max, float(np.nanmax(np.abs(X))) if ok.any() else 0.0)
+    for X in measured.values():
+        X = np.asarray(X)
+        ok = np.flatnonzero(np.isfinite(X))
+        if ok.size == 0:
+            continue
+        for j in ok[np.linspace(0, ok.size - 1, n_labels).round().astype(int)]:
+            ax.plot(X[j].real, X[j].imag, "k.", ms=5)
+            ax.annotate(f"{speed[j]:.4g}", (X[j].real, X[j].imag), fontsize=7, xytext=(3, 3),
+                        textcoords="offset points")
+    r_max = r_max or 1.0
+    # the angle scale: circles and spokes, labelled in the chosen convention
+    th = np.linspace(0, 2 * np.pi, 181)
+    for f in (0.5, 1.0):
+        ax.plot(f * r_max * np.cos(th), f * r_max * np.sin(th), color="0.8", lw=0.6, zorder=0)
+    for deg in range(0, 360, 45):
+        a = math.radians(deg)
+        ax.plot([0, r_max * math.cos(a)], [0, r_max * math.sin(a)], color="0.85", lw=0.6, zorder=0)
+        shown = deg if phase == "lead" else (-deg) % 360
+        ax.text(1.08 * r_max * math.cos(a), 1.08 * r_max * math.sin(a), f"{shown}°", fontsize=7,
+                ha="center", va="center", color="0.4")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel(_label(f"{order}X in phase, Re X", amp_unit))
+    ax.set_ylabel(_label(f"{order}X quadrature, Im X", amp_unit))
+    ax.set_title(f"polar plot ({order}X; angles: phase {phase}; labels: speed in "
+                 f"{speed_unit if speed_unit != 'dimensionless' else 'dimensionless units'})", fontsize=9)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    return fig
+
+
+# ------------------------------------------------------------------ orbits
+def _whirl(X: complex, Y: complex, turning: float) -> str:
+    """``forward`` or ``backward``: the 1X orbit ``x + i y = F e^{i phi} + B e^{-i phi}`` with
+    ``F = (X + iY)/2``, ``B = conj(X - iY)/2``, against the sense of rotation."""
+    fwd, bwd = abs(X + 1j * Y), abs(X - 1j * Y)
+    return "forward" if (fwd >= bwd) == (turning > 0) else "backward"
+
+
+def plot_orbit(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    phi: np.ndarray,
+    at_times: Sequence[float],
+    *,
+    filtered: bool = True,
+    unfiltered: bool = True,
+    unit: str = "rad",
+    speed_unit: str = "dimensionless",
+    time_unit: str = "dimensionless",
+    labels: tuple[str, str] = ("x (horizontal)", "y (vertical)"),
+    ax=None,
+):
+    """Orbits (``y`` against ``x``) over the revolution at each of ``at_times``.
+
+    One panel per time (or the caller's axes: one, all orbits on it, or one per time).
+    The unfiltered orbit has its mean over the revolution removed (as a probe's AC
+    signal); the 1X-filtered orbit is ``(Re(X e^{i phi}), Re(Y e^{i phi}))`` with the
+    revolution's 1X vectors (:func:`order_vectors`).  The keyphasor dot marks where
+    ``phi`` crosses a multiple of ``2 pi`` (on the 1X orbit: ``(Re X, Re Y)``); the arrow
+    shows the direction of the whirl, named forward or backward against the rotation.
+    Titles give the time and the speed.
+    """
+    t, x, y, phi = (np.asarray(v, dtype=float) for v in (t, x, y, phi))
+    at_times = list(np.atleast_1d(np.asarray(at_times, dtype=float)))
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        fig, axs = plt.subplots(1, len(at_times), figsize=(3.6 * len(at_times), 3.8), squeeze=False)
+        axes = list(axs[0])
+    else:
+        axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
+        if len(axes) not in (1, len(at_times)):
+            raise ValueError(f"give one axes or one per time ({len(at_times)}), got {len(axes)}")
+        fig = axes[0].figure
+        axes = axes * len(at_times) if len(axes) == 1 else axes
+    times, marks = _keyphasor_times(t, phi)
+    turning = 1.0 if phi[-1] >= phi[0] else -1.0
+    for k, (tc, a) in enumerate(zip(at_times, axes, strict=True)):
+        if len(times) < 2:
+            raise ValueError("the record holds no whole revolution: no orbit")
+        j = int(np.clip(np.searchsorted(times, tc, side="right") - 1, 0, len(times) - 2))
+        ta, tb = times[j], times[j + 1]
+        sel = (t >= ta) & (t <= tb)
+        tt, pp = np.concatenate([[ta], t[sel], [tb]]), np.concatenate([[marks[j]], phi[sel], [marks[j + 1]]])
+        xx, yy = np.interp(tt, t, x), np.interp(tt, t, y)
+        speed = float(speed_from_rad(abs(marks[j + 1] - marks[j]) / (tb - ta), speed_unit))
+        _, _, vx = order_vectors(tt, xx, pp)
+        _, _, vy = order_vectors(tt, yy, pp)
+        X, Y = vx[1][0], vy[1][0]
+        colour = f"C{k}" if len(set(map(id, axes))) == 1 else "C0"
+        when = f"t = {tc:.4g} {'' if time_unit == 'dimensionless' else time_unit}".rstrip()
+        tag = f"{when}, {speed:.4g} {'(speed)' if speed_unit == 'dimensionless' else speed_unit}"
+        if unfiltered:
+            x0, y0 = xx - np.mean(xx), yy - np.mean(yy)
+            a.plot(x0, y0, color=colour, lw=0.8, alpha=0.6, label="unfiltered (mean removed)")
+            a.plot(x0[0], y0[0], "o", mfc="none", mec="k", ms=6)
+        if filtered and np.isfinite(X) and np.isfinite(Y):
+            ps = np.linspace(marks[j], marks[j + 1], 200)
+            x1, y1 = (X * np.exp(1j * ps)).real, (Y * np.exp(1j * ps)).real
+            whirl = _whirl(X, Y, turning)
+            a.plot(x1, y1, color=colour, lw=1.6, label=f"1X filtered ({whirl} whirl)")
+            a.plot(x1[0], y1[0], "ko", ms=6, label="keyphasor" if k == 0 or len(set(map(id, axes))) > 1 else None)
+            q = 50  # a quarter turn after the mark: the arrow along the motion
+            a.annotate("", xy=(x1[q + 3], y1[q + 3]), xytext=(x1[q], y1[q]),
+                       arrowprops={"arrowstyle": "-|>", "color": colour, "lw": 1.5, "mutation_scale": 14})
+        a.set_aspect("equal", adjustable="datalim")
+        a.set_xlabel(_label(labels[0], unit))
+        a.set_ylabel(_label(labels[1], unit))
+        a.set_title(tag, fontsize=9)
+        a.axhline(0, color="0.85", lw=0.5, zorder=0)
+        a.axvline(0, color="0.85", lw=0.5, zorder=0)
+        a.legend(fontsize=6, loc="upper center", bbox_to_anchor=(0.5, -0.2))
+    return fig
+
+
+# ------------------------------------------------------------------ waterfall
+def plot_waterfall(
+    t: np.ndarray,
+    signal: np.ndarray,
+    phi: np.ndarray,
+    *,
+    revolutions: int = 8,
+    max_order: float = 4.0,
+    x_axis: str = "order",
+    speed_unit: str = "dimensionless",
+    amp_unit: str = "rad",
+    lines: Sequence[int] = (1, 2),
+    ax=None,
+):
+    """Waterfall / order map: spectra of consecutive blocks of ``revolutions`` turns
+    (order tracked: resampled uniformly in ``phi``, Hann window) against speed.
+
+    A complex ``signal`` (``x + i y``, e.g. ``th_y + i th_x``) gives signed orders (``+``
+    forward, ``-`` backward whirl); a real one positive orders (amplitudes of
+    ``Re(X e^{i n phi})``).  ``x_axis="order"`` puts orders on x (``n x`` lines vertical);
+    ``"frequency"`` puts the frequency on x (Hz for rpm; the ``n x`` lines are the rays
+    ``f = n speed``), where a whirl at a fixed natural frequency stands upright.
+    Colour: ``log10`` of the amplitude.
+    """
+    if x_axis not in ("order", "frequency"):
+        raise ValueError(f"x_axis must be 'order' or 'frequency', got {x_axis!r}")
+    fig, (ax,) = _axes(ax, 1, figsize=(8, 4.5))
+    t, phi = np.asarray(t, dtype=float), np.asarray(phi, dtype=float)
+    signal = np.asarray(signal)
+    real = not np.iscomplexobj(signal)
+    omega = np.abs(np.gradient(phi, t))
+    speeds, orders, amp = order_map(t, phi, speed_from_rad(omega, speed_unit), signal,
+                                    revolutions=revolutions, max_order=max_order)
+    if real:  # a real channel: +n and -n carry half the amplitude each
+        keep = orders >= 0
+        amp = amp[:, keep] * np.where(orders[keep] > 0, 2.0, 1.0)
+        orders = orders[keep]
+    fps = _freq_per_speed(speed_unit)
+    freq_unit = FREQUENCY_UNITS[speed_unit][0]
+    if amp.size:
+        c = np.log10(amp + 1e-12 * max(float(amp.max()), 1e-300))
+        if x_axis == "order":
+            mesh = ax.pcolormesh(orders, speeds, c, shading="nearest", cmap="viridis")
+        else:
+            order_grid, speed_grid = np.meshgrid(orders, speeds)
+            mesh = ax.pcolormesh(order_grid * speed_grid * fps, speed_grid, c, shading="nearest", cmap="viridis")
+        fig.colorbar(mesh, ax=ax, label=f"log10 amplitude [{amp_unit}]")
+    top = float(speeds.max()) if speeds.size else 1.0
+    lo = float(speeds.min()) if speeds.size else 0.0
+    signed = [n for n in lines] + ([] if real else [-n for n in lines])
+    for n in signed:
+        if x_axis == "order":
+            ax.axvline(n, color="w", lw=0.8, ls=":")
+            ax.text(n, top, f"{n}x", color="k", ha="center", va="bottom", fontsize=8)
+        else:
+            ax.plot([n * lo * fps, n * top * fps], [lo, top], color="w", lw=0.8, ls=":")
+            ax.text(n * top * fps, top, f"{n}x", color="k", ha="center", va="bottom", fontsize=8)
+    if x_axis == "order":
+        ax.set_xlabel("rotation order" + (" (+ forward, - backward whirl)" if not real else ""))
+    else:
+        ax.set_xlabel(_label("frequency" + (" (+ forward, - backward whirl)" if not real else ""), freq_unit))
+    ax.set_ylabel(_label("speed", speed_unit))
+    ax.set_title(f"waterfall: spectra of {revolutions}-revolution blocks", fontsize=10)
+    return fig
+
+
+# ------------------------------------------------------------------ Campbell
+def whirl_frequencies(
+    speed: np.ndarray,
+    stiffness: float,
+    damping: float,
+    ip: float,
+    anisotropy: float = 0.0,
+    cross_coupling: float = 0.0,
+) -> dict[str, np.ndarray]:
+    """Damped natural (whirl) frequencies of the linear fixed-frame rotor at each speed.
+
+    The model (docs/PHYSICS.md 1.4, the fault library's fixed-frame effects)::
+
+        th_y'' + ip phid th_x' + c th_y' + (k + delta) th_y + q th_x = 0
+        th_x'' - ip phid th_y' + c th_x' + (k - delta) th_x - q th_y = 0
+
+    i.e. ``z'' - i ip phid z' + c z' + k z + delta conj(z) - i q z = 0`` with ``stiffness``
+    ``k``, ``damping`` ``c``, ``anisotropy`` ``delta`` (the ``support_anisotropy``
+    coefficient: ``k_y = k + delta``, ``k_x = k - delta``) and ``cross_coupling`` ``q``
+    (``cross_coupled_stiffness``).  The eigenvalues ``lambda = -sigma +- i w`` of its 4x4
+    real state matrix give the damped frequencies ``w``; each mode's eigenvector
+    ``(v_y, v_x)`` whirls forward when its forward part ``|v_y + i v_x|`` exceeds its
+    backward part ``|v_y - i v_x|`` (a straight-line mode has both equal).  Returns
+    ``{"forward": w_f, "backward": w_b}``, signed (``w_b < 0`` for a backward whirl; rad
+    per time unit of the inputs), NaN where a mode is over-critically damped.  Where both
+    modes whirl the same way (strong anisotropy), the higher one is the ``forward``
+    branch, each keeping the sign of its own whirl.
+
+    Covered: isotropic and anisotropic supports, gyroscopic stiffening/softening,
+    viscous damping and cross-coupled stiffness (all fixed-frame, linear, constant
+    coefficients at each speed).  Not covered: rotating-frame asymmetry (a crack:
+    periodic coefficients, which need Floquet analysis), non-linear stiffness and dry
+    friction.
+    """
+    speed = np.atleast_1d(np.asarray(speed, dtype=float))
+    k, c, d, q = float(stiffness), float(damping), float(anisotropy), float(cross_coupling)
+    K = np.array([[k + d, q], [-q, k - d]])
+    fwd, bwd = np.full(speed.shape, np.nan), np.full(speed.shape, np.nan)
+    for j, w in enumerate(speed):
+        CG = c * np.eye(2) + ip * w * np.array([[0.0, 1.0], [-1.0, 0.0]])
+        A = np.block([[np.zeros((2, 2)), np.eye(2)], [-K, -CG]])
+        lam, vec = np.linalg.eig(A)
+        modes = []
+        upper = np.flatnonzero(lam.imag > 1e-12 * max(1.0, float(np.max(np.abs(lam)))))
+        if len(upper) == 2 and abs(lam[upper[0]] - lam[upper[1]]) <= 1e-9 * abs(lam[upper[0]]):
+            # a double eigenvalue (isotropic rotor at rest): its eigenvectors are any mix of
+            # the forward and the backward circle, which both belong to it
+            modes = [lam[upper[0]].imag, -lam[upper[0]].imag]
+        else:
+            for i in upper:
+                vy, vx = vec[0, i], vec[1, i]  # th_y = Re(v_y e^{lambda t}), th_x = Re(v_x e^{lambda t})
+                f, b = abs(vy + 1j * vx), abs(vy - 1j * vx)
+                modes.append(lam[i].imag if f >= b else -lam[i].imag)
+        modes.sort(reverse=True)
+        if len(modes) == 2:
+            fwd[j], bwd[j] = modes
+        elif len(modes) == 1:  # one mode over-critically damped
+            (fwd if modes[0] > 0 else bwd)[j] = modes[0]
+    return {"forward": fwd, "backward": bwd}
+
+
+def _crossings(speed: np.ndarray, f: np.ndarray, line: np.ndarray) -> list[tuple[float, float]]:
+    """``(speed, frequency)`` where ``f`` crosses ``line`` (linear interpolation)."""
+    d = f - line
+    out = []
+    for j in np.flatnonzero(np.isfinite(d[:-1]) & np.isfinite(d[1:]) & (np.sign(d[:-1]) != np.sign(d[1:]))):
+        if d[j] == d[j + 1]:
+            continue
+        s = d[j] / (d[j] - d[j + 1])
+        out.append((float(speed[j] + s * (speed[j + 1] - speed[j])), float(f[j] + s * (f[j + 1] - f[j]))))
+    return out
+
+
+def plot_campbell(
+    speed: np.ndarray,
+    whirl_frequencies: Mapping[str, np.ndarray],
+    *,
+    measured_peaks: tuple[np.ndarray, np.ndarray] | None = None,
+    orders: Sequence[int] = (1, 2),
+    critical_orders: Sequence[int] = (1,),
+    speed_unit: str = "rpm",
+    freq_unit: str | None = None,
+    ax=None,
+):
+    """Campbell diagram: whirl frequencies against speed with the ``n x`` lines.
+
+    ``whirl_frequencies``: branch label -> signed frequencies at ``speed`` (negative:
+    backward whirl, drawn dashed as ``|w|``), in ``freq_unit`` (default: Hz for rpm and
+    Hz, otherwise the speed's unit).  ``measured_peaks``: ``(speeds, frequencies)`` seen in
+    the data (dots).  Critical speeds, where a line of ``critical_orders`` crosses a branch,
+    are marked and written in the legend (forward: filled, backward: open; the unbalance
+    excites the forward ones, a support anisotropy the backward ones too).
+    """
+    fig, (ax,) = _axes(ax, 1, figsize=(7, 4.5))
+    speed = np.asarray(speed, dtype=float)
+    fps = _freq_per_speed(speed_unit)
+    freq_unit = freq_unit or FREQUENCY_UNITS[speed_unit][0]
+    top = 0.0
+    for i, (label, w) in enumerate(whirl_frequencies.items()):
+        w = np.asarray(w, dtype=float)
+        back = np.nanmedian(w) < 0 if np.any(np.isfinite(w)) else False
+        ax.plot(speed, np.abs(w), color=f"C{i}", ls="--" if back else "-", lw=1.5,
+                label=f"{label} ({'backward' if back else 'forward'} whirl)")
+        top = max(top, float(np.nanmax(np.abs(w))) if np.any(np.isfinite(w)) else 0.0)
+    for n in orders:
+        line = n * speed * fps
+        ax.plot(speed, line, color="0.3", lw=0.8, ls=":")
+        ax.text(speed[-1], line[-1], f" {n}x", fontsize=8, va="center")
+        if n not in critical_orders:
+            continue
+        for i, w in enumerate(whirl_frequencies.values()):
+            w = np.asarray(w, dtype=float)
+            back = np.nanmedian(w) < 0 if np.any(np.isfinite(w)) else False
+            for s, f in _crossings(speed, np.abs(w), line):
+                ax.plot(s, f, "o", ms=8, color=f"C{i}", mfc="none" if back else f"C{i}", mec="k",
+                        label=f"critical {n}x {'backward' if back else 'forward'}: {s:.4g} "
+                              f"{'' if speed_unit == 'dimensionless' else speed_unit}".rstrip())
+    if measured_peaks is not None:
+        ps, pf = (np.asarray(v, dtype=float) for v in measured_peaks)
+        ax.plot(ps, np.abs(pf), "k.", ms=4, label="measured peaks")
+        top = max(top, float(np.nanmax(np.abs(pf))) if pf.size else 0.0)
+    ax.set_ylim(0, 1.15 * max(top, float(np.nanmax(speed)) * fps if speed.size else 1.0))
+    ax.set_xlabel(_label("speed", speed_unit))
+    ax.set_ylabel(_label("whirl frequency", freq_unit))
+    ax.set_title("Campbell diagram (whirl frequencies and n x lines)", fontsize=10)
+    ax.legend(fontsize=7, loc="upper left")
+    return fig
+
+
+# ------------------------------------------------------------------ parameter tracks
+@dataclass
+class ParameterTracks:
+    """The recursive identifier's estimates over time.
+
+    ``coefficients[name][k]``: each regression coefficient after sample ``k``;
+    ``log10_p[effect][k]`` and ``significant[effect][k]``: its effect-last F test at the
+    latest checkpoint at or before ``k`` (False/0 before the first); ``groups``: effect ->
+    its coefficients.
+    """
+
+    t: np.ndarray
+    coefficients: dict[str, np.ndarray]
+    significant: dict[str, np.ndarray]
+    log10_p: dict[str, np.ndarray]
+    groups: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    forgetting: float = 1.0
+
+
+def parameter_tracks(
+    meas,
+    model: Sequence[str],
+    ip: float,
+    forgetting: float = 0.9995,
+    *,
+    alpha: float = 0.05,
+    equation: str = "both",
+    known: Mapping[str, Mapping[str, float]] | None = None,
+    checkpoints: int = 200,
+) -> ParameterTracks:
+    """Run the recursive QR identifier (:class:`identifier.RecursiveQR`) over ``meas``.
+
+    The regression is the diagnosis's (:func:`rotor_env.regression.regression_arrays`:
+    both equations per sample, the stiffness known ``k = 1`` unless ``stiffness`` is in
+    ``model``).  ``forgetting`` ``lambda`` per regression row: the memory is about
+    ``1 / (1 - lambda)`` rows (``/2`` samples with both equations), so a coefficient that
+    changes (a crack opening) is followed.  The coefficients are recorded after every
+    sample (inside the compiled update); each effect's effect-last partial F test (Kish
+    effective samples under forgetting) at ``checkpoints`` evenly spaced samples, held to
+    the next.  Those p-values assume a white residual: on coloured residuals they are
+    optimistic (the diagnosis's verdicts use HAC tests instead).
+    """
+    from identifier import RecursiveQR
+
+    from ..regression import RegressionSpec, regression_arrays
+
+    spec = RegressionSpec(effects=tuple(model), equation=equation, known=known or {})
+    data = np.ascontiguousarray(meas.data)
+    X, y = regression_arrays(spec, data, float(ip))
+    rows, n, m = spec.rows_per_sample, spec.n_columns, len(data)
+    est = RecursiveQR(columns=spec.columns, groups=spec.groups, forgetting=forgetting)
+    coef = np.zeros((m, n))
+    names = tuple(spec.groups)
+    at, tests_lp, tests_sig = [], [], []
+    edges = np.unique(np.linspace(0, m, max(1, checkpoints) + 1).round().astype(int))
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        h = est.update_many(X[a * rows:b * rows], y[a * rows:b * rows], return_coefficients=n)
+        coef[a:b] = h.coefficients[n][rows - 1::rows]
+        tests = est.effect_tests(alpha)
+        at.append(b - 1)
+        tests_lp.append(tests.log10_p)
+        tests_sig.append(tests.significant())
+    latest = np.searchsorted(np.asarray(at), np.arange(m), side="right") - 1  # causal: hold the last test
+    lp = np.where(latest[:, None] >= 0, np.asarray(tests_lp)[np.maximum(latest, 0)], 0.0)
+    sig = np.where(latest[:, None] >= 0, np.asarray(tests_sig)[np.maximum(latest, 0)], False)
+    return ParameterTracks(
+        t=np.asarray(meas.t, dtype=float).copy(),
+        coefficients={c: coef[:, j] for j, c in enumerate(spec.columns)},
+        significant={e: sig[:, g].astype(bool) for g, e in enumerate(names)},
+        log10_p={e: lp[:, g] for g, e in enumerate(names)},
+        groups=dict(spec.groups),
+        forgetting=float(forgetting),
+    )
+
+
+def plot_parameter_tracks(
+    t: np.ndarray,
+    tracks: Mapping[str, np.ndarray],
+    *,
+    significance: Mapping[str, np.ndarray] | None = None,
+    truth: Mapping[str, float] | None = None,
+    groups: Mapping[str, Sequence[str]] | None = None,
+    final: Mapping[str, tuple[float, float]] | None = None,
+    time_unit: str = "dimensionless",
+    value_unit: str = "dimensionless",
+    ax=None,
+):
+    """Parameter tracks of an online identification (top) and when each effect is
+    significant (bottom: a bar where its test passes).
+
+    ``tracks``: name -> value at each ``t``; ``significance``: name (a track, or an
+    effect of ``groups``) -> bool at each ``t``: a track is drawn solid where its effect
+    is significant, thin where not; ``truth``: name -> the true value (dashed, for
+    simulated data); ``final``: name -> ``(estimate, half-width)`` of a batch fit (a band
+    at the right edge).  ``ax``: a pair of axes (the bottom one only with ``significance``).
+    """
+    t = np.asarray(t, dtype=float)
+    n_ax = 2 if significance else 1
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        fig, axs = plt.subplots(n_ax, 1, figsize=(8, 5.5 if n_ax == 2 else 4), sharex=True, squeeze=False,
+                                gridspec_kw={"height_ratios": [3, 1][:n_ax]})
+        axes = list(axs[:, 0])
+    else:
+        fig, axes = _axes(ax, n_ax)
+    a_tr = axes[0]
+    effect_of = {c: e for e, cols in (groups or {}).items() for c in cols}
+    for i, (name, v) in enumerate(tracks.items()):
+        colour = f"C{i % 10}"
+        v = np.asarray(v, dtype=float)
+        key = name if significance and name in significance else effect_of.get(name)
+        if significance and key in significance:
+            sig = np.asarray(significance[key], dtype=bool)
+            a_tr.plot(t, v, color=colour, lw=0.6, alpha=0.45)
+            a_tr.plot(t, np.where(sig, v, np.nan), color=colour, lw=1.6, label=name)
+        else:
+            a_tr.plot(t, v, color=colour, lw=1.2, label=name)
+        if truth and name in truth:
+            a_tr.axhline(truth[name], color=colour, ls="--", lw=0.9)
+        if final and name in final:
+            est, half = final[name]
+            a_tr.errorbar([t[-1]], [est], yerr=[[half], [half]], fmt="s", color=colour, ms=4, capsize=3)
+    a_tr.set_ylabel(_label("coefficient", value_unit))
+    a_tr.set_title("online identification: parameter tracks"
+                   + (" (bold: effect significant; dashed: truth)" if truth else " (bold: effect significant)"
+                      if significance else ""), fontsize=10)
+    a_tr.legend(fontsize=7, ncol=min(4, max(1, len(tracks))), loc="upper left")
+    if n_ax == 2:
+        a_sig = axes[1]
+        names = list(significance)
+        for i, name in enumerate(names):
+            sig = np.asarray(significance[name], dtype=bool)
+            edges = np.flatnonzero(np.diff(np.concatenate([[0], sig.astype(np.int8), [0]])))
+            spans = [(t[a], t[min(b, len(t) - 1)] - t[a]) for a, b in zip(edges[0::2], edges[1::2], strict=True)]
+            a_sig.broken_barh(spans, (i - 0.35, 0.7), color="C2")
+        a_sig.set_yticks(range(len(names)), names, fontsize=7)
+        a_sig.set_ylim(-0.6, len(names) - 0.4)
+        a_sig.set_title("significant (effect-last F test, alpha as given)", fontsize=8)
+        a_sig.set_xlabel(_label("t", time_unit))
+    else:
+        a_tr.set_xlabel(_label("t", time_unit))
+    return fig
