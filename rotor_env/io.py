@@ -19,10 +19,12 @@ of the file (the header is line 1).
 
 from __future__ import annotations
 
+import array
 import csv
 import difflib
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -51,12 +53,37 @@ class MeasurementError(ValueError):
     """A measurement file that cannot be used as it is."""
 
 
-def _read_csv(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
-    """Header, data and the file line number of every data row (blank lines are skipped)."""
+def read_table(path: str | os.PathLike, *, numeric: Sequence[str] | None = None
+               ) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Header, float data and the file line number of every data row of a CSV or Parquet file.
+
+    ``lines[r]`` is the 1-based line of data row ``r`` in the file (the header is line
+    1, blank lines are skipped; for Parquet, row ``r`` is "line" ``r + 2``).  Every
+    column must be numeric, unless ``numeric`` names the columns that must be: any other
+    column that is not (a text note, a label) is read as NaN — the caller ignores it.
+    Errors are :class:`MeasurementError` naming the file, line, column and value.
+    A timestamp/date column is refused (time is a number in the model's unit).
+    """
+    path = Path(path)
+    if path.suffix == ".parquet":
+        return _read_parquet(path, numeric)
+    return _read_csv(path, numeric)
+
+
+def _read_csv(path: Path, numeric: Sequence[str] | None = None) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Header, data and the file line number of every data row (blank lines are skipped).
+
+    pyarrow's CSV reader first (multi-threaded, 8 bytes a value); a file it cannot take
+    as it is (a bad cell, a blank line, a wrong field count: anything unusual) is read
+    again by the line-by-line parser, whose errors name the line, column and value.
+    """
+    fast = _read_csv_arrow(path, numeric)
+    if fast is not None:
+        return fast
     try:
         # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is not part of the first name
         with open(path, newline="", encoding="utf-8-sig") as fh:
-            return _parse_csv(path, csv.reader(fh))
+            return _parse_csv(path, csv.reader(fh), numeric)
     except UnicodeDecodeError as exc:
         raise MeasurementError(
             f"{path}: not a text (UTF-8) CSV file ({exc.reason} at byte {exc.start}); "
@@ -68,14 +95,56 @@ def _read_csv(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
         raise MeasurementError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
 
 
-def _parse_csv(path: Path, reader) -> tuple[list[str], np.ndarray, np.ndarray]:
+def _read_csv_arrow(path: Path, numeric: Sequence[str] | None):
+    """The fast path: ``None`` unless the file is clean (no blank line, null or odd cell)."""
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pc
+    except ImportError:  # pragma: no cover - pyarrow is a dependency
+        return None
+    try:
+        with open(path, "rb") as fh:
+            first = fh.readline()
+        names = [h.strip() for h in next(csv.reader([first.decode("utf-8-sig")]))]
+    except (OSError, UnicodeDecodeError, csv.Error, StopIteration):
+        return None  # the careful parser says what is wrong
+    if not names or len(set(names)) != len(names):
+        return None
+    want = set(names) if numeric is None else set(numeric)
+    try:
+        table = pc.read_csv(
+            path,
+            read_options=pc.ReadOptions(column_names=names, skip_rows=1),
+            parse_options=pc.ParseOptions(ignore_empty_lines=False),
+            convert_options=pc.ConvertOptions(column_types={n: pa.float64() for n in names if n in want}),
+        )
+    except (pa.ArrowException, OSError, ValueError):
+        return None
+    m = table.num_rows
+    data = np.empty((m, len(names)))
+    for j, name in enumerate(names):
+        col = table.column(j)
+        if pa.types.is_floating(col.type) or pa.types.is_integer(col.type):
+            if col.null_count:
+                return None  # an empty cell, a blank line or "nan": the careful parser names it
+            data[:, j] = col.to_numpy()
+        elif name in want:
+            return None
+        else:
+            data[:, j] = np.nan  # a column the caller does not need and that is not numeric
+    del table
+    return names, data, np.arange(m, dtype=np.int64) + 2
+
+
+def _parse_csv(path: Path, reader, numeric: Sequence[str] | None = None) -> tuple[list[str], np.ndarray, np.ndarray]:
     try:
         header = next(reader)
     except StopIteration:
         raise MeasurementError(f"{path}: the file is empty (expected a header line)") from None
     header = [h.strip() for h in header]
-    rows = []
-    lines = []
+    need = [numeric is None or h in numeric for h in header]
+    values = array.array("d")  # 8 bytes a value (lists of floats took 3.3 GB for 5 M rows)
+    lines = array.array("q")
     for row in reader:
         line_no = reader.line_num
         if not row or all(not c.strip() for c in row):
@@ -84,21 +153,23 @@ def _parse_csv(path: Path, reader) -> tuple[list[str], np.ndarray, np.ndarray]:
             raise MeasurementError(
                 f"{path}, line {line_no}: {len(row)} fields, but the header has {len(header)}"
             )
-        vals = []
-        for name, cell in zip(header, row, strict=True):
+        for name, cell, required in zip(header, row, need, strict=True):
             try:
-                vals.append(float(cell))
+                values.append(float(cell))
             except ValueError:
+                if not required:
+                    values.append(math.nan)
+                    continue
                 raise MeasurementError(
                     f"{path}, line {line_no}, column {name!r}: {cell.strip()!r} is not a number"
                 ) from None
-        rows.append(vals)
         lines.append(line_no)
-    data = np.array(rows, dtype=float).reshape(len(rows), len(header))
-    return header, data, np.array(lines, dtype=np.int64)
+    data = np.frombuffer(values, dtype=float).reshape(len(lines), len(header)).copy()
+    return header, data, np.frombuffer(lines, dtype=np.int64).copy()
 
 
-def _read_parquet(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
+def _read_parquet(path: Path, numeric: Sequence[str] | None = None) -> tuple[list[str], np.ndarray, np.ndarray]:
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     try:
@@ -106,29 +177,28 @@ def _read_parquet(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
     except Exception as exc:
         raise MeasurementError(f"{path}: not a readable Parquet file ({exc})") from None
     header = list(table.column_names)
-    cols = []
-    for name in header:
+    data = np.empty((table.num_rows, len(header)))
+    for j, name in enumerate(header):
+        col = table.column(j)
+        kind = col.type
+        if pa.types.is_timestamp(kind) or pa.types.is_date(kind) or pa.types.is_time(kind) \
+                or pa.types.is_duration(kind):
+            if numeric is not None and name not in numeric:
+                data[:, j] = np.nan
+                continue
+            raise MeasurementError(
+                f"{path}, column {name!r}: a {kind} column, not a number: give the time as a number "
+                "(the model's dimensionless time, or seconds from the start: the diagnosis rescales it)"
+            )
         try:
-            cols.append(np.asarray(table.column(name).to_numpy(zero_copy_only=False), dtype=float))
-        except (TypeError, ValueError):
-            raise MeasurementError(f"{path}, column {name!r}: not numeric") from None
-    data = np.column_stack(cols) if cols else np.empty((0, 0))
+            data[:, j] = np.asarray(col.to_numpy(zero_copy_only=False), dtype=float)
+        except (TypeError, ValueError, pa.ArrowException):
+            if numeric is not None and name not in numeric:
+                data[:, j] = np.nan  # a text column the caller ignores
+                continue
+            raise MeasurementError(f"{path}, column {name!r}: not numeric ({kind})") from None
     # "line" of row r: r + 2, as if the table were a CSV file with a header line
     return header, data, np.arange(data.shape[0], dtype=np.int64) + 2
-
-
-def read_table(path: str | os.PathLike) -> tuple[list[str], np.ndarray, np.ndarray]:
-    """Header, float data and the file line of every data row of a CSV or Parquet file.
-
-    The generic reader behind every table the package loads (measurements, order-tracked
-    vectors, rig waveforms): errors name the file, line and column.
-    """
-    path = Path(path)
-    if not path.exists():
-        raise MeasurementError(f"{path}: no such file")
-    if path.is_dir():
-        raise MeasurementError(f"{path}: is a directory, not a data file")
-    return _read_parquet(path) if path.suffix == ".parquet" else _read_csv(path)
 
 
 def derive_rates(t: np.ndarray, x: np.ndarray, order: int, window: float = 0.2) -> np.ndarray:
@@ -148,7 +218,7 @@ def load_measurements(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> M
         raise MeasurementError(f"{path}: no such file")
     if path.is_dir():
         raise MeasurementError(f"{path}: is a directory, not a measurement file")
-    header, data, lines = _read_parquet(path) if path.suffix == ".parquet" else _read_csv(path)
+    header, data, lines = read_table(path, numeric=COLUMNS)
     dup = {h for h in header if header.count(h) > 1}
     if dup:
         raise MeasurementError(f"{path}: column(s) {sorted(dup)} appear more than once")
@@ -169,6 +239,11 @@ def load_measurements(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> M
         if misspelt:
             u, c = next(iter(misspelt.items()))
             raise MeasurementError(f"{path}: unknown column {u!r} — did you mean {c!r}?")
+    notes: list[str] = []
+    if unknown:
+        text = [u for u in unknown if np.isnan(data[:, header.index(u)]).all() and data.shape[0]]
+        notes.append(f"ignored column(s) {', '.join(map(repr, unknown))}"
+                     + (f" ({', '.join(map(repr, text))} not numeric)" if text else "") + ": not model columns")
     if data.shape[0] == 0:
         raise MeasurementError(f"{path}: the file has a header but no data rows")
     if data.shape[0] < min_rows:
@@ -180,27 +255,36 @@ def load_measurements(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> M
         bad = ~np.isfinite(col)
         if bad.any():
             r = int(np.argmax(bad))
-            raise MeasurementError(f"{path}, line {lines[r]}, column {c!r}: value {col[r]!r} is not finite")
+            raise MeasurementError(f"{path}, line {lines[r]}, column {c!r}: value {_num(col[r])} is not finite")
+        big = np.abs(col) > MAX_ABS
+        if big.any():
+            r = int(np.argmax(big))
+            raise MeasurementError(f"{path}, line {lines[r]}, column {c!r}: value {_num(col[r])} is beyond "
+                                   f"{MAX_ABS:g}: not a measurement (the model's products of it overflow)")
     t = data[:, idx["t"]]
     step = np.diff(t)
     if (step <= 0).any():
         r = int(np.argmax(step <= 0)) + 1
         raise MeasurementError(
-            f"{path}, line {lines[r]}, column 't': time {t[r]!r} does not increase (previous {t[r - 1]!r})"
+            f"{path}, line {lines[r]}, column 't': time {_num(t[r])} does not increase (previous {_num(t[r - 1])})"
         )
     dt = float(np.median(step))
     off = np.abs(step - dt) > UNIFORM_RTOL * dt
     if off.any():
         r = int(np.argmax(off)) + 1
         raise MeasurementError(
-            f"{path}, line {lines[r]}, column 't': non-uniform sampling: step {step[r - 1]!r} "
-            f"where the file's step is {dt!r}"
+            f"{path}, line {lines[r]}, column 't': non-uniform sampling: step {_num(step[r - 1])} "
+            f"where the file's step is {_num(dt)}"
         )
     out = np.empty((data.shape[0], len(COLUMNS)))
     for j, c in enumerate(COLUMNS):
         if c in idx:
             out[:, j] = data[:, idx[c]]
-    notes = _check_units(path, out, idx, lines)
+    notes += _check_units(path, out, idx, lines)
+    _check_rates(path, out, idx)
+    if data.shape[0] > LARGE_RECORD:
+        notes.append(f"{data.shape[0]} samples: a diagnosis costs about {data.shape[0] * DIAGNOSE_S_PER_SAMPLE / 60:.0f} "
+                     "min (decimate the record to speed it up)")
     for c, (src, order) in DERIVABLE.items():
         if c not in idx:
             out[:, COLUMNS.index(c)] = derive_rates(t, out[:, COLUMNS.index(src)], order)
@@ -209,6 +293,47 @@ def load_measurements(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> M
         notes.append(f"estimated: {', '.join(derived)}")
     note = f" ({'; '.join(notes)})" if notes else ""
     return Measurements(out, source=f"{path}{note}")
+
+
+#: a measurement cell beyond this is no measurement: squares and products of it overflow
+MAX_ABS = 1e30
+#: records longer than this get a note with what a diagnosis of them costs
+LARGE_RECORD = 1_000_000
+#: a diagnosis's cost per sample (measured: 40 001 samples in ~4.5 s, 5 M in ~560 s)
+DIAGNOSE_S_PER_SAMPLE = 1.1e-4
+
+
+def _num(x) -> str:
+    """A number as a user reads it: ``50.01``, not ``np.float64(50.01)``."""
+    return repr(float(x))
+
+
+def _check_rates(path: Path, out: np.ndarray, idx: dict) -> None:
+    """Measured inclination rates must be the rates of the angles in the time unit of ``t``.
+
+    A time column in another unit than the rates (microseconds beside rates per model
+    time unit) makes every derivative wrong by that factor, and the model's free run
+    would take that many more integration steps: refused with the factor named.
+    """
+    t = out[:, 0]
+    for ang, rate in (("theta_x", "theta_x_dot"), ("theta_y", "theta_y_dot"), ("phi_dot", "phi_ddot")):
+        if rate not in idx or ang not in idx:
+            continue
+        x = out[:, COLUMNS.index(ang)]
+        given = out[:, COLUMNS.index(rate)]
+        num = np.gradient(x, t)
+        gg = float(given @ given)
+        if not (gg > 0 and np.isfinite(gg)) or len(t) < 10:
+            continue
+        ratio = float(num @ given) / gg
+        # the slope only speaks when the angle's own rate explains it (not noise, not aliased)
+        fit = np.linalg.norm(num - ratio * given) < 0.5 * np.linalg.norm(num)
+        if fit and not (1.0 / RATE_MISMATCH < abs(ratio) < RATE_MISMATCH):
+            raise MeasurementError(
+                f"{path}, column {rate!r}: the rate of column {ang!r} over 't' is {ratio:.4g}x this column: "
+                "'t' and the rates are in different time units (time in microseconds or milliseconds?); "
+                "give every column in one time unit"
+            )
 
 
 #: an inclination beyond this (1 rad, 57 deg) is not a shaft's tilt: degrees, or another quantity
@@ -238,10 +363,10 @@ def _check_units(path: Path, out: np.ndarray, idx: dict, lines) -> list[str]:
             out[:, j_phi] = np.unwrap(phi)
             notes.append("phi unwrapped (it was wrapped to one turn)")
         elif span <= 360.0 + 1e-6 and float(np.max(np.abs(np.diff(phi)))) > 300.0:
-            raise MeasurementError(f"{path}, line {lines[r]}, column 'phi': wrapped to 360 ({phi[r - 1]!r} -> "
-                                   f"{phi[r]!r}): the spin angle is in degrees; convert it to radians")
+            raise MeasurementError(f"{path}, line {lines[r]}, column 'phi': wrapped to 360 ({_num(phi[r - 1])} -> "
+                                   f"{_num(phi[r])}): the spin angle is in degrees; convert it to radians")
         else:
-            raise MeasurementError(f"{path}, line {lines[r]}, column 'phi': jumps from {phi[r - 1]!r} to {phi[r]!r} "
+            raise MeasurementError(f"{path}, line {lines[r]}, column 'phi': jumps from {_num(phi[r - 1])} to {_num(phi[r])} "
                                    "between two samples (more than half a turn: the angle is aliased or not in "
                                    "radians)")
     if "phi_dot" in idx:
@@ -259,7 +384,7 @@ def _check_units(path: Path, out: np.ndarray, idx: dict, lines) -> list[str]:
         big = np.abs(col) > MAX_TILT
         if big.any():
             r = int(np.argmax(big))
-            raise MeasurementError(f"{path}, line {lines[r]}, column {c!r}: value {col[r]!r} is beyond "
+            raise MeasurementError(f"{path}, line {lines[r]}, column {c!r}: value {_num(col[r])} is beyond "
                                    f"{MAX_TILT:g} rad ({math.degrees(MAX_TILT):.0f} deg), not a shaft's tilt: "
                                    "degrees? (inclinations are in radians)")
     return notes
