@@ -30,6 +30,7 @@ recorded state.  Integration is split at parameter jumps (a crack).
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -40,7 +41,7 @@ from .effects import EFFECTS, Effect
 from .measurements import COLUMNS, Measurements
 from .params import RotorParams
 
-__all__ = ["RunUp", "SimulationError", "Simulator", "simulate"]
+__all__ = ["RunUp", "SimulationError", "SimulationTooLarge", "Simulator", "simulate"]
 
 MAX_SUBSTEP = 0.01
 #: Inclinations above this are treated as a failed (diverged) simulation.
@@ -49,9 +50,45 @@ DIVERGENCE_LIMIT = 1e3
 STATUS_OK = 0
 STATUS_DIVERGED = 1
 
+#: integration steps of one compiled call: between calls Ctrl-C (SIGINT) reaches Python
+#: (numba's loops do not look at signals; ~0.3 s of work each)
+CHUNK_STEPS = 1_000_000
+#: a free-run simulation longer than this many steps is refused (~30 s; a run-up of 40 000
+#: samples at dt = 0.01 takes 40 000): the record's time is not in the model's unit
+MAX_FREE_RUN_STEPS = 100_000_000
+#: a simulation is refused when its samples would take more than this share of the free memory
+MEMORY_SHARE = 0.5
+
 
 class SimulationError(RuntimeError):
     """The simulation diverged (non-finite or huge state)."""
+
+
+class SimulationTooLarge(ValueError):
+    """A simulation that would not fit in memory or would take hours: refused before it starts."""
+
+
+def _available_memory() -> int:
+    """Bytes of memory available now (``MemAvailable``; the physical memory where unknown)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
+        return 8 << 30
+
+
+def _size(nbytes: float) -> str:
+    for unit in ("bytes", "KB", "MB", "GB", "TB", "PB"):
+        if nbytes < 1000 or unit == "PB":
+            return f"{nbytes:.3g} {unit}"
+        nbytes /= 1000
+    raise AssertionError  # pragma: no cover
 
 
 # ------------------------------------------------------------------ code generation
@@ -248,10 +285,17 @@ class Simulator:
         for name, v in (("t_end", t_end), ("dt", dt)):
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
-        n_total = int(round(t_end / dt))
+        n_total = round(t_end / dt)
         if n_total < 1:
             raise ValueError(f"t_end={t_end} is shorter than one sample interval dt={dt}")
         every, dt_sub = self.substeps(dt)
+        need = (n_total + 1) * len(COLUMNS) * 8.0
+        free = _available_memory()
+        if need > MEMORY_SHARE * free:
+            raise SimulationTooLarge(
+                f"t_end={t_end:g} at dt={dt:g} is {n_total + 1:,} samples: they need {_size(need)} of memory "
+                f"({len(COLUMNS)} columns of 8 bytes), and {_size(free)} is free; shorten t_end or raise dt"
+            )
         state = np.array(initial, dtype=float)
         if state.shape != (4,) or not np.isfinite(state).all():
             raise ValueError(f"initial state must be 4 finite numbers (th_x, th_y, w_x, w_y), got {initial}")
@@ -264,6 +308,8 @@ class Simulator:
             breaks.add(k_crack)
         if progress:
             breaks.update(range(0, n_total, max(1, n_total // 100)))
+        if n_total * every > CHUNK_STEPS:  # compiled calls of bounded length: Ctrl-C is heard
+            breaks.update(range(0, n_total, max(1, CHUNK_STEPS // every)))
         breaks = sorted(b for b in breaks if b > 0)
         pbar = _progress(n_total) if progress else None
         a = run_up.rate
@@ -378,16 +424,34 @@ def free_run(
     t = np.ascontiguousarray(t, dtype=float)
     if len(t) < 2:
         raise ValueError("free_run needs at least two samples")
-    every, _ = sim.substeps(float(np.median(np.diff(t))))
+    dt = float(np.median(np.diff(t)))
+    every, _ = sim.substeps(dt)
+    steps = every * (len(t) - 1.0)
+    if not steps <= MAX_FREE_RUN_STEPS:
+        raise SimulationTooLarge(
+            f"the free-run simulation of this record needs {steps:.3g} integration steps ({len(t)} samples "
+            f"every {dt:.4g} time units, steps of at most {max_substep:g}), more than the {MAX_FREE_RUN_STEPS:.0e} "
+            "allowed: the model's time is dimensionless (natural frequency 1, a run-up samples it every ~0.01); "
+            "is 't' in another unit (microseconds, milliseconds)? Rescale it (diagnose does) or decimate the record"
+        )
     coef, h = sim.coefficients(float(t[0]))
     state = np.array(initial, dtype=float)
     out = np.empty((len(t), len(COLUMNS)))
     a0 = (phi_dot[1] - phi_dot[0]) / (t[1] - t[0])
     out[0] = sim._row(float(t[0]), float(phi[0]), float(phi_dot[0]), a0, state, (0.0, 0.0))
-    done = integrate_profile(
-        sim.accel, state, t, np.ascontiguousarray(phi, dtype=float), np.ascontiguousarray(phi_dot, dtype=float),
-        params.ip, coef, h, every, out,
-    )
+    phi = np.ascontiguousarray(phi, dtype=float)
+    phi_dot = np.ascontiguousarray(phi_dot, dtype=float)
+    # in chunks of about CHUNK_STEPS steps: Ctrl-C reaches Python between them (each interval
+    # starts afresh from the measured spin, so the chunks give the same numbers as one call)
+    per = max(1, CHUNK_STEPS // every)
+    done = len(t)
+    for k0 in range(0, len(t) - 1, per):
+        k1 = min(len(t), k0 + per + 1)
+        got = integrate_profile(sim.accel, state, t[k0:k1], phi[k0:k1], phi_dot[k0:k1], params.ip, coef, h,
+                                every, out[k0:k1])
+        if got < k1 - k0:
+            done = k0 + got
+            break
     if done < len(t):
         raise SimulationError(f"the model diverged at t = {t[done]:.4g} in the free-run simulation")
     return Measurements(out)
