@@ -41,6 +41,7 @@ __all__ = [
     "plot_waterfall",
     "speed_from_rad",
     "whirl_frequencies",
+    "whirl_peaks",
 ]
 
 #: speed unit -> factor from rad per time unit (t in s for the engineering units)
@@ -526,6 +527,34 @@ def whirl_frequencies(
     return {"forward": fwd, "backward": bwd}
 
 
+def whirl_peaks(
+    t: np.ndarray, signal: np.ndarray, phi: np.ndarray, *, revolutions: int = 8, max_order: float = 4.0,
+    min_ratio: float = 20.0, clearance: float = 0.3,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Non-synchronous whirl peaks in the data: ``(speeds, signed frequencies)`` (rad per
+    time unit), one per block of the waterfall at most.
+
+    In each block (:func:`~rotor_env.diagnosis.orders.order_map` of the complex
+    ``signal``) the largest line farther than ``clearance`` orders from every integer
+    order (the forced 0x, 1x, 2x ... response and their window leakage) is kept if it
+    stands ``min_ratio`` times above the block's median: a free whirl (the transient
+    after a critical, an instability) at frequency ``order * speed``.
+    """
+    t, phi = np.asarray(t, dtype=float), np.asarray(phi, dtype=float)
+    omega = np.abs(np.gradient(phi, t))
+    speeds, orders, amp = order_map(t, phi, omega, np.asarray(signal), revolutions=revolutions,
+                                    max_order=max_order)
+    free = np.abs(orders - np.round(orders)) > clearance
+    out_s, out_w = [], []
+    if amp.size and free.any():
+        for s, row in zip(speeds, amp, strict=True):
+            j = int(np.argmax(np.where(free, row, -np.inf)))
+            if row[j] > min_ratio * max(float(np.median(row)), 1e-300):
+                out_s.append(s)
+                out_w.append(orders[j] * s)
+    return np.array(out_s), np.array(out_w)
+
+
 def _crossings(speed: np.ndarray, f: np.ndarray, line: np.ndarray) -> list[tuple[float, float]]:
     """``(speed, frequency)`` where ``f`` crosses ``line`` (linear interpolation)."""
     d = f - line
@@ -566,13 +595,21 @@ def plot_campbell(
     for i, (label, w) in enumerate(whirl_frequencies.items()):
         w = np.asarray(w, dtype=float)
         back = np.nanmedian(w) < 0 if np.any(np.isfinite(w)) else False
+        whirl = "backward" if back else "forward"
         ax.plot(speed, np.abs(w), color=f"C{i}", ls="--" if back else "-", lw=1.5,
-                label=f"{label} ({'backward' if back else 'forward'} whirl)")
+                label=label if whirl in label else f"{label} ({whirl} whirl)")
         top = max(top, float(np.nanmax(np.abs(w))) if np.any(np.isfinite(w)) else 0.0)
+    if measured_peaks is not None:
+        ps, pf = (np.asarray(v, dtype=float) for v in measured_peaks)
+        top = max(top, float(np.nanmax(np.abs(pf))) if pf.size else 0.0)
+    y_top = 1.15 * max(top, float(np.nanmax(speed)) * fps if speed.size else 1.0)
     for n in orders:
         line = n * speed * fps
         ax.plot(speed, line, color="0.3", lw=0.8, ls=":")
-        ax.text(speed[-1], line[-1], f" {n}x", fontsize=8, va="center")
+        inside = np.flatnonzero(line <= y_top)
+        if inside.size:  # the label where the line leaves the plot, not beyond it
+            j = inside[-1]
+            ax.text(speed[j], line[j], f" {n}x", fontsize=8, va="top" if j < len(line) - 1 else "center")
         if n not in critical_orders:
             continue
         for i, w in enumerate(whirl_frequencies.values()):
@@ -583,10 +620,10 @@ def plot_campbell(
                         label=f"critical {n}x {'backward' if back else 'forward'}: {s:.4g} "
                               f"{'' if speed_unit == 'dimensionless' else speed_unit}".rstrip())
     if measured_peaks is not None:
-        ps, pf = (np.asarray(v, dtype=float) for v in measured_peaks)
-        ax.plot(ps, np.abs(pf), "k.", ms=4, label="measured peaks")
-        top = max(top, float(np.nanmax(np.abs(pf))) if pf.size else 0.0)
-    ax.set_ylim(0, 1.15 * max(top, float(np.nanmax(speed)) * fps if speed.size else 1.0))
+        ax.plot(ps[pf >= 0], pf[pf >= 0], "k.", ms=5, label="measured peaks, forward")
+        if np.any(pf < 0):
+            ax.plot(ps[pf < 0], -pf[pf < 0], "kx", ms=4, label="measured peaks, backward")
+    ax.set_ylim(0, y_top)
     ax.set_xlabel(_label("speed", speed_unit))
     ax.set_ylabel(_label("whirl frequency", freq_unit))
     ax.set_title("Campbell diagram (whirl frequencies and n x lines)", fontsize=10)
@@ -717,6 +754,15 @@ def plot_parameter_tracks(
         if final and name in final:
             est, half = final[name]
             a_tr.errorbar([t[-1]], [est], yerr=[[half], [half]], fmt="s", color=colour, ms=4, capsize=3)
+    # the scale of the settled estimates: the first samples of a recursive fit swing wildly
+    settled = [np.asarray(v, dtype=float)[len(t) // 5:] for v in tracks.values()]
+    settled += [np.array([x]) for x in (truth or {}).values()]
+    settled += [np.array([e - h, e + h]) for e, h in (final or {}).values()]
+    vals = np.concatenate([v[np.isfinite(v)] for v in settled]) if settled else np.empty(0)
+    if vals.size:
+        lo, hi = float(vals.min()), float(vals.max())
+        pad = 0.1 * (hi - lo) if hi > lo else 0.1 * max(abs(hi), 1e-12)
+        a_tr.set_ylim(lo - pad, hi + pad)
     a_tr.set_ylabel(_label("coefficient", value_unit))
     a_tr.set_title("online identification: parameter tracks"
                    + (" (bold: effect significant; dashed: truth)" if truth else " (bold: effect significant)"

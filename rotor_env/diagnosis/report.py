@@ -6,12 +6,76 @@ import base64
 import html
 import io
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..outputs import atomic_write, atomic_write_text, check_writable
-from .orders import _first_rows, autocorrelation, complex_rows, order_map
+from . import field_plots as fp
+from .orders import _first_rows, autocorrelation, complex_rows, failing_windows, order_map
+
+
+@dataclass(frozen=True)
+class PlotUnits:
+    """How a diagnosis's (dimensionless) samples are drawn.
+
+    ``t_plot = t * time_factor``; a rate ``w`` (rad per model time unit) is
+    ``w * rate_factor`` rad per plotted time unit, shown in ``speed_unit`` (see
+    :mod:`.field_plots`).  Without a known time unit everything stays dimensionless.
+    """
+
+    time_factor: float = 1.0
+    rate_factor: float = 1.0
+    time_unit: str = "dimensionless"
+    speed_unit: str = "dimensionless"
+    amp_unit: str = "rad"
+
+    def time(self, t):
+        return np.asarray(t, dtype=float) * self.time_factor
+
+    def speed(self, w):
+        """A spin speed (rad per model time unit) in :attr:`speed_unit`."""
+        return fp.speed_from_rad(np.asarray(w, dtype=float) * self.rate_factor, self.speed_unit)
+
+    def frequency(self, w):
+        """A whirl frequency (rad per model time unit) in the Campbell/waterfall unit."""
+        return fp.frequency_from_rad(np.asarray(w, dtype=float) * self.rate_factor, self.speed_unit)
+
+    def label(self, quantity: str, unit: str | None = None) -> str:
+        unit = unit or "dimensionless"
+        return f"{quantity} ({unit})"
+
+
+def _interp_linear(x, xp: np.ndarray, fp_: np.ndarray):
+    """``np.interp`` that extrapolates linearly past both ends (end slopes over up to 10
+    samples) instead of clamping: a secondary axis built on it maps the whole axis range,
+    margins included, one-to-one (a clamped map puts the ticks in the wrong place).
+    ``xp`` must be increasing."""
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(np.interp(x, xp, fp_), dtype=float)
+    k = min(len(xp) - 1, 10)
+    if k < 1:
+        return y
+    lo, hi = x < xp[0], x > xp[-1]
+    s_lo = (fp_[k] - fp_[0]) / (xp[k] - xp[0])
+    s_hi = (fp_[-1] - fp_[-1 - k]) / (xp[-1] - xp[-1 - k])
+    y = np.where(lo, fp_[0] + (x - xp[0]) * s_lo, y)
+    return np.where(hi, fp_[-1] + (x - xp[-1]) * s_hi, y)
+
+
+def speed_axis_functions(t: np.ndarray, speed: np.ndarray):
+    """``(t -> speed, speed -> t)`` for ``secondary_xaxis`` where the speed is monotone in
+    time (run-up or coast-down): piecewise linear through the samples, extrapolated
+    linearly past the record's ends; ``None`` where the speed is not monotone."""
+    t, speed = np.asarray(t, dtype=float), np.asarray(speed, dtype=float)
+    d = np.diff(speed)
+    if len(t) < 2 or not (np.all(d > 0) or np.all(d < 0)):
+        return None
+    if d[0] > 0:
+        return (lambda x: _interp_linear(x, t, speed)), (lambda s: _interp_linear(s, speed, t))
+    # a coast-down: the inverse interpolates on the speed reversed (np.interp needs it rising)
+    return (lambda x: _interp_linear(x, t, speed)), (lambda s: _interp_linear(s, speed[::-1], t[::-1]))
 
 
 class DiagnosisFigures:
@@ -27,39 +91,115 @@ class DiagnosisFigures:
             return fig, ax
         return ax.figure, ax
 
-    def plot_compare(self, ax=None, which: str = "after"):
-        """Measured vs model amplitude |theta| against speed (free-run simulation)."""
-        fig, ax = self._ax(ax)
+    # -------------------------------------------------------------- units
+    def plot_units(self) -> PlotUnits:
+        """The units the figures use: the model's dimensionless ones, or seconds and rpm
+        where the diagnosis knows its file's time unit (``time_unit == "s"``) and scale
+        (``time_scale``: ``t_model = time_scale * t_file``)."""
+        scale = float(getattr(self, "time_scale", 1.0) or 1.0)
+        unit = getattr(self, "time_unit", None)
+        amp = getattr(self, "amplitude_unit", None) or "rad"
+        if unit == "s":
+            return PlotUnits(time_factor=1.0 / scale, rate_factor=scale, time_unit="s", speed_unit="rpm",
+                             amp_unit=amp)
+        return PlotUnits(amp_unit=amp)
+
+    def _field_cache(self) -> dict:
+        """Per-revolution vectors etc., computed once per diagnosis (figures share them)."""
+        cache = self.__dict__.get("_field_plot_cache")
+        if cache is None:
+            cache = self.__dict__["_field_plot_cache"] = {}
+        return cache
+
+    def _critical_window(self) -> tuple[float, float]:
+        """The speed range around the measured 1x peak (the critical): where the zooms look."""
         m = self.data.meas
-        ax.plot(m.phi_dot, np.hypot(m.theta_x, m.theta_y), "k", lw=1.2, label="measured")
-        for comp, style, label in ((self.before, "C3--", "starting model"), (self.after, "C0", "final model")):
-            if which in ("after", "both") or comp is self.before:
-                if comp.simulated is not None:
-                    s = comp.simulated
-                    ax.plot(s.phi_dot, np.hypot(s.theta_x, s.theta_y), style, lw=1,
-                            label=f"{label}: {', '.join(comp.model)} (fit {comp.fit_percent:.0f} %)")
-        ax.set_xlabel("spin speed (dimensionless)")
-        ax.set_ylabel(r"amplitude $|\theta|$")
-        ax.legend(fontsize=7)
-        ax.set_title("measured vs model response (free run)")
+        amp = np.hypot(m.theta_x, m.theta_y)
+        w_peak = float(m.phi_dot[int(np.argmax(amp))])
+        lo, hi = float(np.min(m.phi_dot)), float(np.max(m.phi_dot))
+        half = max(0.15 * abs(w_peak), 0.03 * (hi - lo))
+        return max(lo, w_peak - half), min(hi, w_peak + half)
+
+    # -------------------------------------------------------------- compare
+    def plot_compare(self, ax=None, which: str = "after", zoom: bool = True):
+        """Measured vs model amplitude ``|theta|`` against speed (free-run simulation),
+        with a zoom on the critical; without ``ax`` (or with a pair of axes) a second
+        panel shows the output error ``|theta_measured - theta_model|`` of the starting
+        and the final model, so the change is seen where it happens."""
+        u = self.plot_units()
+        if ax is None:
+            import matplotlib.pyplot as plt
+
+            fig, axes = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True, gridspec_kw={"height_ratios": [3, 2]})
+        else:
+            axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
+            fig = axes[0].figure
+        top = axes[0]
+        m = self.data.meas
+        speed = u.speed(m.phi_dot)
+        curves = [(speed, np.hypot(m.theta_x, m.theta_y), {"color": "k", "lw": 1.2}, "measured")]
+        comps = [(self.before, {"color": "C3", "ls": "--", "lw": 1.0}, "starting model")]
+        if which in ("after", "both"):
+            comps.append((self.after, {"color": "C0", "lw": 1.0}, "final model"))
+        errors = []
+        for comp, style, label in comps:
+            if comp.simulated is not None:
+                sim = comp.simulated
+                curves.append((u.speed(sim.phi_dot), np.hypot(sim.theta_x, sim.theta_y), style,
+                               f"{label}: {', '.join(comp.model)} (fit {comp.fit_percent:.0f} %)"))
+                errors.append((np.hypot(m.theta_x - sim.theta_x, m.theta_y - sim.theta_y), style, label))
+        for x, y, style, label in curves:
+            top.plot(x, y, label=label, **style)
+        top.set_ylabel(u.label(r"amplitude $|\theta|$", u.amp_unit))
+        top.legend(fontsize=7, loc="upper left")
+        top.set_title("measured vs model response (free run)")
+        lo, hi = (float(v) for v in u.speed(np.array(self._critical_window())))
+        if zoom and hi > lo:
+            inset = top.inset_axes([0.62, 0.45, 0.36, 0.5])
+            for x, y, style, _ in curves:
+                sel = (x >= lo) & (x <= hi)
+                inset.plot(x[sel], y[sel], **style)
+            inset.set_title("zoom: the critical", fontsize=7)
+            inset.tick_params(labelsize=6)
+            top.indicate_inset_zoom(inset, edgecolor="0.5")
+        if len(axes) > 1:
+            bottom = axes[1]
+            for err, style, label in errors:
+                bottom.plot(speed, err, label=f"{label} (RMS {np.sqrt(np.mean(err**2)):.3g})",
+                            **{**style, "lw": 0.8})
+            bottom.set_ylabel(u.label(r"output error $|\theta - \theta_{model}|$", u.amp_unit))
+            bottom.legend(fontsize=7, loc="upper left")
+            bottom.set_xlabel(u.label("spin speed", u.speed_unit))
+        else:
+            top.set_xlabel(u.label("spin speed", u.speed_unit))
         return fig
 
     def plot_residual(self, ax=None, which: str = "before"):
-        """Equation-error residual against time (and speed on a top axis)."""
+        """Equation-error residual against time, speed on a top axis (exact: piecewise
+        linear through the samples, extrapolated linearly past the ends); shaded where
+        its rolling RMS stands above 2x the noise floor."""
         fig, ax = self._ax(ax)
+        u = self.plot_units()
         comp = self.before if which == "before" else self.after
-        t = np.repeat(self.data.meas.t, 2 if self.equation == "both" else 1)
+        m = self.data.meas
+        t = np.repeat(u.time(m.t), 2 if self.equation == "both" else 1)
         ax.plot(t, comp.residual, lw=0.3, color="C3" if which == "before" else "C0")
-        for w in self.windows if which == "before" else []:
-            ax.axvspan(w["t_start"], w["t_end"], color="orange", alpha=0.2)
-        ax.set_xlabel("t")
-        ax.set_ylabel("equation residual")
-        ax.set_title(f"residual of the {which} model ({', '.join(comp.model)}); shaded: above noise floor")
-        t_m, w_m = self.data.meas.t, self.data.meas.phi_dot
-        if np.all(np.diff(w_m) > 0):  # a speed axis only where speed maps one-to-one onto time
-            top = ax.secondary_xaxis(
-                "top", functions=(lambda x: np.interp(x, t_m, w_m), lambda s: np.interp(s, w_m, t_m)))
-            top.set_xlabel("speed")
+        if which == "before":
+            windows = self.windows
+        else:  # where the final model still fails (against the same floor)
+            windows, _ = failing_windows(m.t, _first_rows(comp.residual, self.equation), floor=self.noise_floor)
+        for w in windows:
+            ax.axvspan(w["t_start"] * u.time_factor, w["t_end"] * u.time_factor, color="orange", alpha=0.2)
+        ax.axhline(2 * self.noise_floor, color="k", lw=0.5, ls=":")
+        ax.axhline(-2 * self.noise_floor, color="k", lw=0.5, ls=":")
+        ax.set_xlabel(u.label("t", u.time_unit))
+        ax.set_ylabel("equation residual (dimensionless moment)")
+        ax.set_title(f"residual of the {which} model ({', '.join(comp.model)}); RMS {comp.rms:.3g}; "
+                     "shaded: above 2x the noise floor (dotted)", fontsize=9)
+        funcs = speed_axis_functions(u.time(m.t), u.speed(m.phi_dot))
+        if funcs is not None:  # a speed axis only where speed maps one-to-one onto time
+            top = ax.secondary_xaxis("top", functions=funcs)
+            top.set_xlabel(u.label("speed", u.speed_unit))
         return fig
 
     def plot_order_map(self, ax=None, which: str = "before", lookalikes: int = 2):
@@ -156,26 +296,197 @@ class DiagnosisFigures:
         ax.set_title("which effect is missing (red: added)")
         return fig
 
-    def plot_before_after(self, ax=None):
-        """Equation-error RMS and free-run fit % along the forward selection."""
-        fig, ax = self._ax(ax)
+    def plot_before_after(self, ax=None, zoom: bool = True):
+        """Equation-error RMS and free-run fit % along the forward selection; without
+        ``ax`` (or with a pair of axes) also the residual of the starting and the final
+        model over time, zoomed where the starting model failed most."""
+        if ax is None:
+            import matplotlib.pyplot as plt
+
+            fig, axes = plt.subplots(2, 1, figsize=(8, 7.5), gridspec_kw={"height_ratios": [2, 3], "hspace": 0.35})
+        else:
+            axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
+            fig = axes[0].figure
+        ax = axes[0]
         steps = [self.before, *self.steps]
         labels = ["start"] + [f"+ {e}" for e in self.missing]
         x = np.arange(len(steps))
         ax.bar(x - 0.2, [s.fit_percent for s in steps], 0.4, color="C0", label="free-run fit %")
-        ax.set_ylabel("fit %")
+        ax.set_ylabel("free-run fit (%)")
         ax2 = ax.twinx()
         ax2.bar(x + 0.2, [s.rms for s in steps], 0.4, color="C3", label="equation RMS")
-        ax2.set_ylabel("equation error RMS")
+        ax2.set_ylabel("equation error RMS (dimensionless)")
         ax.set_xticks(x, labels, rotation=15, fontsize=8)
         ax.set_title("before and after adding the missing effects")
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = ax2.get_legend_handles_labels()
         ax2.legend(h1 + h2, l1 + l2, fontsize=8, loc="lower right")  # on top of both bar sets
+        if len(axes) > 1:
+            self._residual_change(axes[1], zoom)
+        return fig
+
+    def _residual_change(self, ax, zoom: bool = True) -> None:
+        """The starting and the final model's residual (first equation) over time, with the
+        noise floor, and a zoom on the stretch where the starting model fails most."""
+        u = self.plot_units()
+        m = self.data.meas
+        t = u.time(m.t)
+        r0 = _first_rows(self.before.residual, self.equation)
+        r1 = _first_rows(self.after.residual, self.equation)
+        ax.plot(t, r0, lw=0.3, color="C3", label=f"starting model (RMS {self.before.rms:.3g})")
+        ax.plot(t, r1, lw=0.3, color="C0", label=f"final model (RMS {self.after.rms:.3g})")
+        ax.axhspan(-2 * self.noise_floor, 2 * self.noise_floor, color="0.5", alpha=0.25,
+                   label=f"2x noise floor ({self.noise_floor:.3g})")
+        ax.set_xlabel(u.label("t", u.time_unit))
+        ax.set_ylabel("equation residual (dimensionless)")
+        ax.legend(fontsize=7, loc="upper left", markerscale=4)
+        ax.set_title("residual before and after", fontsize=9)
+        if zoom and len(t) > 50:
+            # the stretch (a tenth of the record) with the largest starting-model misfit
+            n = max(10, len(t) // 10)
+            energy = np.convolve(r0 * r0, np.ones(n), mode="valid")
+            k = int(np.argmax(energy))
+            inset = ax.inset_axes([0.58, 0.55, 0.4, 0.42])
+            inset.plot(t[k:k + n], r0[k:k + n], lw=0.4, color="C3")
+            inset.plot(t[k:k + n], r1[k:k + n], lw=0.4, color="C0")
+            inset.tick_params(labelsize=6)
+            inset.set_title("zoom: where the starting model fails most", fontsize=7)
+            ax.indicate_inset_zoom(inset, edgecolor="0.5")
+
+    # -------------------------------------------------------------- field views
+    def _vectors(self) -> dict:
+        """1X vectors per revolution (lead convention) of the measured angles and of the
+        starting and final models' free runs: ``{"t", "speed", "measured", "models"}``."""
+        cache = self._field_cache()
+        if "vectors" not in cache:
+            m = self.data.meas
+            channels = {"θy (horizontal)": "theta_y", "θx (vertical)": "theta_x"}
+
+            def one(rec):
+                out, t_mid, speed = {}, None, None
+                for label, col in channels.items():
+                    t_mid, speed, v = fp.order_vectors(rec.t, rec[col], rec.phi)
+                    out[label] = v[1]
+                return t_mid, speed, out
+
+            t_mid, speed, measured = one(m)
+            models = {}
+            for comp, name in ((self.before, "starting model"), (self.after, "final model")):
+                if comp.simulated is not None and len(comp.simulated) == len(m):
+                    models[name] = one(comp.simulated)[2]
+            cache["vectors"] = {"t": t_mid, "speed": speed, "measured": measured, "models": models}
+        return cache["vectors"]
+
+    def plot_bode(self, ax=None, phase: str = "lag"):
+        """Bode plot of the 1X vectors of ``theta_y`` (horizontal) and ``theta_x`` (vertical):
+        measured, starting and final model (free runs); ``ax``: a pair of axes."""
+        u = self.plot_units()
+        v = self._vectors()
+        return fp.plot_bode(u.speed(v["speed"]), v["measured"], v["models"], speed_unit=u.speed_unit,
+                            amp_unit=u.amp_unit, phase=phase, ax=ax)
+
+    def plot_polar(self, ax=None, phase: str = "lag"):
+        """Polar (Nyquist) plot of the same 1X vectors, speeds written along the curves."""
+        u = self.plot_units()
+        v = self._vectors()
+        return fp.plot_polar(u.speed(v["speed"]), v["measured"], v["models"], speed_unit=u.speed_unit,
+                             amp_unit=u.amp_unit, phase=phase, ax=ax)
+
+    def orbit_times(self) -> list[float]:
+        """Three moments for orbits (model time): below, at and above the critical (the
+        revolution of the largest measured 1X vector)."""
+        v = self._vectors()
+        t, speed = v["t"], v["speed"]
+        if t is None or len(t) == 0:
+            return []
+        amp = np.hypot(*(np.nan_to_num(np.abs(x)) for x in v["measured"].values()))
+        j = int(np.argmax(amp))
+        out = []
+        for target in (0.75 * speed[j], None, 1.3 * speed[j]):
+            k = j if target is None else int(np.nanargmin(np.abs(speed - target)))
+            out.append(float(t[k]))
+        return sorted(set(out))
+
+    def plot_orbit(self, ax=None, at_times=None, filtered: bool = True):
+        """Orbits ``theta_x`` (vertical) against ``theta_y`` (horizontal), unfiltered and
+        1X-filtered with the keyphasor dot, at ``at_times`` (model time; default: below, at
+        and above the critical)."""
+        u = self.plot_units()
+        m = self.data.raw
+        times = self.orbit_times() if at_times is None else list(np.atleast_1d(at_times))
+        return fp.plot_orbit(u.time(m.t), m.theta_y, m.theta_x, m.phi, [u.time(x) for x in times],
+                             filtered=filtered, unit=u.amp_unit, speed_unit=u.speed_unit, time_unit=u.time_unit,
+                             labels=("θy (horizontal)", "θx (vertical)"), ax=ax)
+
+    def plot_waterfall(self, ax=None, x_axis: str = "frequency"):
+        """Waterfall of the measured ``z = theta_y + i theta_x`` (unfiltered): spectra of
+        8-revolution blocks against speed, signed (forward/backward whirl), 1x/2x lines."""
+        u = self.plot_units()
+        m = self.data.raw
+        return fp.plot_waterfall(u.time(m.t), m.theta_y + 1j * m.theta_x, m.phi, x_axis=x_axis,
+                                 speed_unit=u.speed_unit, amp_unit=u.amp_unit, ax=ax)
+
+    def whirl_model(self, n: int = 200) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """``(speed, {branch: signed frequency})`` of the final model's linear fixed-frame part
+        (stiffness, damping, ``ip``, support anisotropy, cross-coupling) over the measured
+        speed range, in model units (:func:`.field_plots.whirl_frequencies`)."""
+        phys = self.after.physical
+        top = float(np.max(np.abs(self.data.meas.phi_dot)))
+        speed = np.linspace(0.0, top, n)
+        return speed, fp.whirl_frequencies(speed, phys.get("k", 1.0), phys.get("c", 0.0), self.ip,
+                                           phys.get("support_anisotropy", 0.0), phys.get("cross_coupling", 0.0))
+
+    def plot_campbell(self, ax=None):
+        """Campbell diagram of the final model (forward and backward whirl against speed,
+        1x and 2x lines, criticals where 1x crosses a branch) with the whirl peaks found in
+        the measured waterfall."""
+        u = self.plot_units()
+        speed, branches = self.whirl_model()
+        m = self.data.raw
+        ps, pw = fp.whirl_peaks(m.t, m.theta_y + 1j * m.theta_x, m.phi)
+        fig = fp.plot_campbell(u.speed(speed), {k: u.frequency(w) for k, w in branches.items()},
+                               measured_peaks=(u.speed(ps), u.frequency(pw)) if len(ps) else None,
+                               speed_unit=u.speed_unit, ax=ax)
+        covered = [e for e in ("viscous_damping", "stiffness", "support_anisotropy", "cross_coupled_stiffness")
+                   if e in self.model]
+        _first_axes(fig, ax).set_title(
+            "Campbell diagram of the final model (linear fixed-frame part: ip"
+            + (", " + ", ".join(covered) if covered else "") + ")", fontsize=9)
+        return fig
+
+    def parameter_tracks(self, forgetting: float | None = None) -> fp.ParameterTracks:
+        """The recursive identifier run over the (prefiltered) data with the final model's
+        effects: coefficients after every sample and per-effect significance.  Default
+        ``forgetting``: a memory of a tenth of the record (at least 2000 rows)."""
+        cache = self._field_cache()
+        key = ("tracks", forgetting)
+        if key not in cache:
+            rows = len(self.data.meas) * (2 if self.equation == "both" else 1)
+            lam = forgetting if forgetting is not None else 1.0 - 1.0 / max(2000.0, rows / 10.0)
+            cache[key] = fp.parameter_tracks(self.data.meas, self.model, self.ip, lam, alpha=self.alpha,
+                                             equation=self.equation)
+        return cache[key]
+
+    def plot_parameter_tracks(self, ax=None, truth: dict[str, float] | None = None,
+                              forgetting: float | None = None):
+        """Parameter and significance tracks of the online identification; the batch
+        estimates of the diagnosis (95 % HAC) at the right end; ``truth`` (coefficient
+        name -> value) dashed for simulated data."""
+        u = self.plot_units()
+        tr = self.parameter_tracks(forgetting)
+        final = {c: (float(v), 1.96 * float(s)) for c, v, s in
+                 zip(self.after.columns, self.after.coefficients, self.after.standard_errors, strict=True)
+                 if c in tr.coefficients}
+        fig = fp.plot_parameter_tracks(u.time(tr.t), tr.coefficients, significance=tr.significant, truth=truth,
+                                       groups=tr.groups, final=final, time_unit=u.time_unit, ax=ax)
+        _first_axes(fig, ax).set_title(
+            f"online identification (recursive QR, forgetting {tr.forgetting:.5g}): bold where the effect is "
+            "significant; squares: batch estimate ± 95 %", fontsize=8)
         return fig
 
     #: the figures :meth:`figures` draws, by file name
-    FIGURES = ("compare", "residual", "order_map", "autocorrelation", "candidates", "before_after")
+    FIGURES = ("compare", "residual", "order_map", "autocorrelation", "candidates", "before_after",
+               "residual_after", "bode", "polar", "orbit", "waterfall", "campbell", "parameter_tracks")
 
     def figures(self) -> dict[str, object]:
         return {
@@ -185,6 +496,13 @@ class DiagnosisFigures:
             "autocorrelation": self.plot_autocorrelation(),
             "candidates": self.plot_candidates(),
             "before_after": self.plot_before_after(),
+            "residual_after": self.plot_residual(which="after"),
+            "bode": self.plot_bode(),
+            "polar": self.plot_polar(),
+            "orbit": self.plot_orbit(),
+            "waterfall": self.plot_waterfall(),
+            "campbell": self.plot_campbell(),
+            "parameter_tracks": self.plot_parameter_tracks(),
         }
 
     def save_figures(self, folder: str | Path, *, overwrite: bool = True) -> list[Path]:
@@ -357,6 +675,10 @@ class DiagnosisFigures:
         )
         coef_head = ("<tr><th>coefficient</th><th>estimate</th><th>std. error</th>"
                      + ("<th>noise (errors-in-variables) bias removed</th>" if bias is not None else "") + "</tr>")
+        u = self.plot_units()
+        units_note = (f"Time in s and speed in rpm (time scale {self.time_scale:.6g} from the identified "
+                      "natural frequency)." if u.time_unit == "s" else
+                      "Dimensionless units: time in 1/natural frequency, speed in rad per time unit, angles in rad.")
         missing = ", ".join(
             f"<b>{_e(e)}</b>" + (f" (from t ≈ {self.onset[e]:.0f})" if self.onset.get(e) is not None else "")
             for e in self.missing
@@ -388,10 +710,44 @@ p.verdict-word{{font-size:2em;font-weight:bold;margin:.2em 0}}
 <h2>Which effect is missing</h2>{img('candidates')}
 <table><tr><th>effect</th><th>F</th><th>log10 p</th><th>RMS after</th><th>fit % after</th><th>corr.</th><th>order overlap</th><th>physical story</th></tr>{cand_rows}</table>
 <h2>Before and after</h2>{img('before_after')}
+<p>The final model's residual (shaded where it still stands above 2&times; the noise floor):</p>
+{img('residual_after')}
 <table class='coefficients'>{coef_head}{coef_rows}</table>
+<h2>Bode and polar plots</h2>
+<p>1X vectors per revolution (least squares against the spin angle between keyphasor marks) of the
+measured angles and of the starting and final models' free runs; phase lag as instruments show it
+(x = A cos(&phi; &minus; lag)). {_e(units_note)}</p>
+{img('bode')}{img('polar')}
+<h2>Orbits</h2>
+<p>&theta;x (vertical) against &theta;y (horizontal) over one revolution below, at and above the critical:
+unfiltered (mean removed) and 1X-filtered; the dot is the keyphasor (&phi; a multiple of 2&pi;), the arrow
+the direction of the whirl.</p>
+{img('orbit')}
+<h2>Waterfall</h2>
+<p>Spectra of the measured z = &theta;y + i &theta;x over 8-revolution blocks against speed: positive
+frequencies whirl forward, negative backward; dotted: the 1x and 2x lines.</p>
+{img('waterfall')}
+<h2>Campbell diagram</h2>
+<p>Whirl frequencies of the final model's linear fixed-frame part against speed, the 1x and 2x lines and
+the criticals where 1x crosses a branch; dots: free-whirl peaks found in the measured waterfall.
+A rotating-frame asymmetry (crack) would need a Floquet analysis and is not in these branches.</p>
+{img('campbell')}
+<h2>Parameter tracks</h2>
+<p>The recursive QR identifier run over the data with the final model's effects: every coefficient
+after every sample, bold where its effect's F test is significant (white-residual test: optimistic on
+coloured residuals; the verdict uses HAC tests), and the batch estimate &plusmn; 95 % at the end.</p>
+{img('parameter_tracks')}
 <pre>{html.escape(self.summary())}</pre>
 </body></html>"""
         return atomic_write_text(path, doc, overwrite=overwrite)
+
+
+def _first_axes(fig, ax):
+    """The axes a plot drew first on: the caller's (one, or the first of several) or the
+    new figure's first."""
+    if ax is None:
+        return fig.axes[0]
+    return ax[0] if isinstance(ax, (list, tuple, np.ndarray)) else ax
 
 
 #: colours of the expected order lines on the order map (visible on viridis)
