@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,11 @@ from .significance import (
 __all__ = ["History", "RecursiveQR"]
 
 _STATE_VERSION = 1
+#: rows per compiled call of a long update: Ctrl-C (SIGINT) reaches Python between calls
+#: (a multiple of the block size, so chunking does not change a single bit)
+CHUNK_ROWS = 1 << 16
+#: a column whose values (times its scale) leave [2^-LIM, 2^LIM] is rescaled by a power of two
+_SCALE_LIMIT = 32
 
 
 @dataclass
@@ -96,6 +102,22 @@ class RecursiveQR:
     its tests are ``testable = False``.  :meth:`identifiable` tells which columns are
     in use.  Nothing returned is ever NaN or inf; the estimator recovers by itself
     when excitation arrives.
+
+    Scaling and exactness
+    ---------------------
+    Each column (and ``y``) is kept internally times a power of two, chosen when its
+    values leave ``[2^-32, 2^32]`` (1 otherwise): data near 1e102 or 1e-110 are factored
+    as well as data near 1 (squares would overflow or underflow), and since a power of
+    two scales every rotation and reflection exactly, the results are the same bits as
+    unscaled arithmetic wherever that does not overflow.  ``R`` is the factor of the
+    scaled data (``scale``).  Rows are reflected in by blocks of 64 counted from the last
+    reset; the rows of an unfinished block are kept (at most 63, saved with the state)
+    and ``R`` holds them applied.  So the factor depends only on the rows and not on how
+    they were split into calls: one call, sample by sample, or saved, restored and
+    continued at any point give the same bits.  (Histories — ``return_energies``,
+    ``return_coefficients`` — need the factor after every row and rotate rows in one by
+    one; such a call starts the block count afresh.)  An update whose result would not
+    be finite (energies beyond the double range) raises and changes nothing.
     """
 
     def __init__(
@@ -174,7 +196,26 @@ class RecursiveQR:
         self.R[...] = np.sqrt(self.prior) * np.eye(size)
         self._col_sq[...] = self.prior
         self._sums[...] = 0.0
+        #: the power of two each column (and y, last) is kept times, inside R
+        self.scale = np.ones(size)
+        self._realign()
         return self
+
+    def _realign(self) -> None:
+        """Start counting blocks here: the current state is the base, nothing pending."""
+        self._base = (self.R.copy(), self._col_sq.copy(), self._sums.copy())
+        self._pend_X = np.empty((0, self.n))
+        self._pend_y = np.empty(0)
+
+    def _snapshot_state(self):
+        return (self.R.copy(), self._col_sq.copy(), self._sums.copy(), self.scale.copy(),
+                None if self._base is None else tuple(a.copy() for a in self._base),
+                self._pend_X, self._pend_y)
+
+    def _restore_state(self, snap) -> None:
+        self.R[...], self._col_sq[...], self._sums[...] = snap[0], snap[1], snap[2]
+        self.scale = snap[3]
+        self._base, self._pend_X, self._pend_y = snap[4], snap[5], snap[6]
 
     @property
     def n_samples(self) -> int:
@@ -224,7 +265,7 @@ class RecursiveQR:
         if y_arr.shape not in ((), (1,)):
             raise ValueError(f"y must be a scalar, got shape {y_arr.shape}")
         X, yv = self._check_xy(x[None, :], y_arr.reshape(1), first=self.n_samples)
-        self._run(X, yv, None, None)
+        self._update(X, yv, None, None, None)
         return self
 
     def update_many(
@@ -249,12 +290,13 @@ class RecursiveQR:
         E = np.empty((m if return_energies else 0, self.n + 1))
         C = np.empty((m if orders.size else 0, orders.size, self.n))
         n_before = self._sums.copy()
-        self._run(X, y, E, C, orders)
+        self._update(X, y, E, C, orders)
         hist = History()
+        sy = self.scale[self.n]
         if return_energies:
-            hist.energies = E
+            hist.energies = E if sy == 1.0 else E / sy / sy
         for q, o in enumerate(orders):
-            hist.coefficients[int(o)] = C[:, q, :o]
+            hist.coefficients[int(o)] = C[:, q, :o] * (self.scale[:o] / sy)
         if return_energies or orders.size:
             lam = self.forgetting
             k = np.arange(1, m + 1)
@@ -271,7 +313,7 @@ class RecursiveQR:
         """Reset, then add all samples (batch use)."""
         X, y = self._check_xy(X, y)
         self.reset()
-        self._run(X, y, None, None)
+        self._update(X, y, None, None, None)
         return self
 
     def _orders(self, spec) -> np.ndarray:
@@ -287,7 +329,105 @@ class RecursiveQR:
             raise ValueError(f"orders must be in 1..{self.n}, got {bad[0]}")
         return orders
 
+    # ------------------------------------------------------------- the update
+    def _update(self, X, y, E, C, orders) -> None:
+        """Validated rows in: rescale if needed, then blocks (or rows, for histories).
+
+        Interrupted (Ctrl-C) or not finite, the estimator is left as it was.
+        """
+        snap = self._snapshot_state()
+        try:
+            self._rescale(X, y)
+            if (E is None or E.shape[0] == 0) and (C is None or C.shape[0] == 0):
+                self._append_blocks(X, y)
+            else:
+                self._append_rows(X, y, E, C, orders)
+            self._check_finite(X, y)
+        except BaseException:
+            self._restore_state(snap)
+            raise
+
+    def _scaled(self, X, y):
+        s = self.scale
+        if (s == 1.0).all():
+            return X, y
+        return X * s[: self.n], y * s[self.n]
+
+    def _rescale(self, X, y) -> None:
+        """Powers of two that keep every column's values near 1 (exact: see the class notes)."""
+        if X.shape[0] == 0:
+            return
+        top = np.empty(self.n + 1)
+        top[: self.n] = np.max(np.abs(X), axis=0)
+        top[self.n] = np.max(np.abs(y))
+        scaled = top * self.scale
+        out = (top > 0) & ((scaled > 2.0**_SCALE_LIMIT) | (scaled < 2.0**-_SCALE_LIMIT))
+        if not out.any():
+            return
+        new = self.scale.copy()
+        new[out] = np.ldexp(1.0, -np.frexp(top[out])[1])
+        factor = new / self.scale
+        arrays = [(self.R, self._col_sq)]
+        if self._base is not None:
+            arrays.append((self._base[0], self._base[1]))
+        for R, col_sq in arrays:
+            R *= factor[None, :]
+            col_sq *= factor[: self.n]  # twice: factor**2 may overflow where col_sq is 0
+            col_sq *= factor[: self.n]
+        self.scale = new
+
+    def _append_blocks(self, X, y) -> None:
+        if self._base is None:  # the compiled step (wrappers) wrote R directly
+            self._realign()
+        lam = self.forgetting
+        Rb, cb, sb = self._base
+        B = K.BLOCK_ROWS
+        if len(self._pend_X):
+            k = min(B - len(self._pend_X), len(X))
+            hx = np.concatenate([self._pend_X, X[:k]])
+            hy = np.concatenate([self._pend_y, y[:k]])
+            X, y = X[k:], y[k:]
+            if len(hx) == B:
+                K.update_block(Rb, cb, sb, *self._scaled(hx, hy), lam)
+                hx, hy = hx[:0], hy[:0]
+        else:
+            hx, hy = self._pend_X, self._pend_y
+        full = (len(X) // B) * B
+        for a in range(0, full, CHUNK_ROWS):
+            b = min(full, a + CHUNK_ROWS)
+            K.update_blocks(Rb, cb, sb, *self._scaled(X[a:b], y[a:b]), lam)
+        if full < len(X):
+            hx, hy = X[full:].copy(), y[full:].copy()
+        self._pend_X, self._pend_y = hx, hy
+        self.R[...], self._col_sq[...], self._sums[...] = Rb, cb, sb
+        if len(hx):
+            K.update_block(self.R, self._col_sq, self._sums, *self._scaled(hx, hy), lam)
+
+    def _append_rows(self, X, y, E, C, orders) -> None:
+        for a in range(0, max(len(X), 1), CHUNK_ROWS):
+            b = min(len(X), a + CHUNK_ROWS)
+            Xs, ys = self._scaled(X[a:b], y[a:b])
+            K.update_rows(self.R, self._col_sq, self._sums, np.ascontiguousarray(Xs), np.ascontiguousarray(ys),
+                          self.forgetting, self.rtol, E[a:b] if E.shape[0] else E, orders,
+                          C[a:b] if C.shape[0] else C)
+        self._realign()
+
+    def _check_finite(self, X, y) -> None:
+        sy = self.scale[self.n]
+        with np.errstate(over="ignore", invalid="ignore"):
+            J0 = float(np.sum(self.R[:, self.n] ** 2)) / sy / sy
+        if np.isfinite(self.R).all() and math.isfinite(J0):
+            return
+        raise ValueError(
+            f"the update would make the estimator non-finite (largest |y| {float(np.max(np.abs(y))):.3g}, "
+            f"largest |x| {float(np.max(np.abs(X))):.3g}: the residual energy leaves the double range); "
+            "rescale the data; the estimator was not changed"
+        )
+
     def _run(self, X, y, E, C, orders=None) -> None:
+        """Rows straight into ``R`` by the compiled kernel (the wrappers' fused path: rows
+        already in the estimator's scale, which stays 1 there); block counting restarts."""
+        self._base = None
         if E is None:
             E = np.empty((0, self.n + 1))
         if C is None:
@@ -297,6 +437,7 @@ class RecursiveQR:
         K.update_rows(
             self.R, self._col_sq, self._sums, X, y, self.forgetting, self.rtol, E, orders, C
         )
+        self._pend_X, self._pend_y = self._pend_X[:0], self._pend_y[:0]
 
     # ------------------------------------------------------------- queries
     def identifiable(self) -> np.ndarray:
@@ -311,11 +452,16 @@ class RecursiveQR:
         K.clean_factor(self.R, keep, work, np.empty(self.n + 1))
         return work
 
-    def residual_energies(self) -> np.ndarray:
-        """``J_0 .. J_n`` (shape ``(n+1,)``): weighted residual sums of squares."""
+    def _scaled_energies(self) -> np.ndarray:
         out = np.empty(self.n + 1)
         K.nested_energies(self._clean(), out)
         return out
+
+    def residual_energies(self) -> np.ndarray:
+        """``J_0 .. J_n`` (shape ``(n+1,)``): weighted residual sums of squares."""
+        sy = self.scale[self.n]
+        out = self._scaled_energies()
+        return out if sy == 1.0 else out / sy / sy
 
     def _order(self, order: int | None) -> int:
         o = self.n if order is None else order
@@ -329,6 +475,8 @@ class RecursiveQR:
         K.nested_coefficients(
             self._clean(), self.identifiable(), out, np.empty((self.n, self.n)), np.empty(self.n)
         )
+        if not (self.scale == 1.0).all():
+            out *= self.scale[None, : self.n] / self.scale[self.n]
         return out
 
     def coefficients(self, order: int | None = None) -> np.ndarray:
@@ -355,13 +503,13 @@ class RecursiveQR:
         T = np.linalg.inv(Rc[np.ix_(idx, idx)])  # triangular, well-posed on identifiable columns
         se = np.zeros(o)
         se[idx] = np.sqrt(J / dof * np.sum(T * T, axis=1))
-        return se
+        return se * (self.scale[:o] / self.scale[self.n])
 
     # ---------------------------------------------------------- significance
     def nested_tests(self, alpha: float = 0.05) -> SignificanceTable:
         """Each column tested as the next addition to the ones before it (the paper)."""
         return nested_tests(
-            self.residual_energies(),
+            self._scaled_energies(),  # F and p do not depend on the scale of y
             self.effective_samples,
             self.columns,
             identifiable=self.identifiable(),
@@ -385,6 +533,13 @@ class RecursiveQR:
         columns of group ``g`` (in :attr:`groups` order).  This is the fast path used
         by :meth:`effect_tests` and by the identification wrapper at every step.
         """
+        J_without, J_full, coef, ident = self._scaled_effect_energies()
+        s = self.scale
+        if (s == 1.0).all():
+            return J_without, J_full, coef, ident
+        return J_without / s[self.n] / s[self.n], J_full / s[self.n] / s[self.n], coef * s[: self.n] / s[self.n], ident
+
+    def _scaled_effect_energies(self):
         masks = self._group_masks()
         ident = np.empty(self.n, dtype=np.bool_)
         coef = np.empty(self.n)
@@ -394,7 +549,7 @@ class RecursiveQR:
 
     def effect_tests(self, alpha: float = 0.05) -> SignificanceTable:
         """Each named effect tested *last*: full model vs full model without its columns."""
-        J_without, J_full, _, ident = self.effect_energies()
+        J_without, J_full, _, ident = self._scaled_effect_energies()  # F, p: scale-free
         masks = self._group_masks()
         d1 = (masks & ident).sum(axis=1).astype(float)
         d2 = self.effective_samples - float(ident.sum())
@@ -422,21 +577,30 @@ class RecursiveQR:
             "columns": list(self.columns),
             "groups": {k: list(v) for k, v in self.groups.items()},
         }
+        if self._base is None:
+            self._realign()
+        Rb, cb, sb = self._base
         with open(path, "wb") as fh:
-            np.savez(fh, R=self.R, col_sq=self._col_sq, sums=self._sums, meta=np.array(json.dumps(meta)))
+            np.savez(fh, R=self.R, col_sq=self._col_sq, sums=self._sums, meta=np.array(json.dumps(meta)),
+                     scale=self.scale, base_R=Rb, base_col_sq=cb, base_sums=sb,
+                     pending_X=self._pend_X, pending_y=self._pend_y)
         return path
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> RecursiveQR:
         """Restore a state written by :meth:`save`; continuing is bit-identical."""
         path = Path(path)
+        optional = ("scale", "base_R", "base_col_sq", "base_sums", "pending_X", "pending_y")
         try:
             with np.load(path, allow_pickle=False) as data:
                 meta = json.loads(str(data["meta"]))
                 R, col_sq, sums = data["R"], data["col_sq"], data["sums"]
-        except (OSError, KeyError, ValueError, TypeError) as exc:
-            # TypeError: np.load of a plain .npy gives an array, not an archive
-            raise ValueError(f"{path}: not a RecursiveQR state file ({exc})") from exc
+                extra = {k: data[k] for k in optional if k in data.files}
+        except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile, AttributeError) as exc:
+            # TypeError: np.load of a plain .npy gives an array, not an archive; EOFError: an
+            # empty file; BadZipFile: a truncated one
+            kind = "empty" if path.is_file() and path.stat().st_size == 0 else "not a RecursiveQR state file"
+            raise ValueError(f"{path}: {kind} ({type(exc).__name__}: {exc})") from None
         if not isinstance(meta, dict) or meta.get("version") != _STATE_VERSION:
             version = meta.get("version") if isinstance(meta, dict) else None
             raise ValueError(f"{path}: unsupported state version {version!r}")
@@ -451,15 +615,66 @@ class RecursiveQR:
         except (KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f"{path}: incomplete RecursiveQR state metadata ({exc!r})") from exc
         n = est.n
-        if R.shape != (n + 1, n + 1) or col_sq.shape != (n,) or sums.shape != (3,):
-            raise ValueError(f"{path}: arrays do not match {n} columns")
-        est.R = np.array(R, dtype=float)
-        est._col_sq = np.array(col_sq, dtype=float)
-        est._sums = np.array(sums, dtype=float)
+        R = _valid_array(path, "R", R, (n + 1, n + 1))
+        col_sq = _valid_array(path, "col_sq", col_sq, (n,))
+        sums = _valid_array(path, "sums", sums, (3,))
+        _valid_factor(path, "R", R, col_sq, sums)
+        est.R, est._col_sq, est._sums = R, col_sq, sums
+        if "scale" in extra:
+            scale = _valid_array(path, "scale", extra["scale"], (n + 1,))
+            if not ((scale > 0).all() and (np.frexp(scale)[0] == 0.5).all()):
+                raise ValueError(f"{path}: 'scale' must hold powers of two, got {scale.tolist()}")
+            est.scale = scale
+        if all(k in extra for k in optional[1:]):
+            bR = _valid_array(path, "base_R", extra["base_R"], (n + 1, n + 1))
+            bc = _valid_array(path, "base_col_sq", extra["base_col_sq"], (n,))
+            bs = _valid_array(path, "base_sums", extra["base_sums"], (3,))
+            _valid_factor(path, "base_R", bR, bc, bs)
+            pX = _valid_array(path, "pending_X", extra["pending_X"], (None, n))
+            py = _valid_array(path, "pending_y", extra["pending_y"], (pX.shape[0],))
+            if pX.shape[0] >= K.BLOCK_ROWS or bs[0] + pX.shape[0] != sums[0]:
+                raise ValueError(f"{path}: {pX.shape[0]} pending rows do not join the base state "
+                                 f"({bs[0]:.0f} samples) to the state ({sums[0]:.0f} samples)")
+            est._base, est._pend_X, est._pend_y = (bR, bc, bs), pX, py
+        else:  # a file without the block state: continue with blocks counted from here
+            est._realign()
         return est
+
+    @property
+    def state_is_aligned(self) -> bool:
+        """Whether rows are being counted into blocks (False after the wrappers' fused step)."""
+        return self._base is not None
 
     def __repr__(self) -> str:
         return (
             f"RecursiveQR(n={self.n}, forgetting={self.forgetting:g}, prior={self.prior:g}, "
             f"samples={self.n_samples}, columns={list(self.columns)})"
         )
+
+
+def _valid_array(path, name: str, a: np.ndarray, shape: tuple) -> np.ndarray:
+    """A real, finite float array of the expected shape (``None``: any length) from a state file."""
+    if np.iscomplexobj(a) or a.dtype.kind not in "fiu":
+        raise ValueError(f"{path}: {name!r} must be real numbers, got dtype {a.dtype}")
+    if a.ndim != len(shape) or any(want is not None and got != want for got, want in zip(a.shape, shape, strict=False)):
+        raise ValueError(f"{path}: {name!r} has shape {a.shape}, expected {tuple('m' if s is None else s for s in shape)}")
+    a = np.array(a, dtype=float)
+    if not np.isfinite(a).all():
+        bad = np.argwhere(~np.isfinite(a))[0]
+        raise ValueError(f"{path}: {name!r} holds a non-finite value at {tuple(int(i) for i in bad)}: "
+                         f"{float(a[tuple(bad)])!r}")
+    return a
+
+
+def _valid_factor(path, name: str, R: np.ndarray, col_sq: np.ndarray, sums: np.ndarray) -> None:
+    """``R`` upper triangular with a non-negative diagonal; norms and sample sums consistent."""
+    below = np.tril(R, -1)
+    if below.any():
+        i, j = np.argwhere(below != 0)[0]
+        raise ValueError(f"{path}: {name!r} is not upper triangular ({name}[{i}, {j}] = {float(R[i, j])!r})")
+    if (np.diag(R) < 0).any():
+        raise ValueError(f"{path}: {name!r} has a negative diagonal entry")
+    if (col_sq < 0).any():
+        raise ValueError(f"{path}: negative column norms")
+    if sums[0] < 0 or sums[0] != int(sums[0]) or sums[1] < 0 or sums[2] < 0:
+        raise ValueError(f"{path}: sample counts {sums.tolist()} are not counts")
