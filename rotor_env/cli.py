@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Sequence
 
@@ -28,9 +29,23 @@ class _UsageError(Exception):
 
 def _parse_number(text: str, what: str) -> float:
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         raise _UsageError(f"{what}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise _UsageError(f"{what}: {text!r} is not a finite number")
+    return value
+
+
+def _ip_value(text: str) -> float:
+    """``--ip``: a number in [0, 1) (argparse reports a bad one as a usage error)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and 0 <= value < 1):
+        raise argparse.ArgumentTypeError(f"{text!r}: the inertia ratio I_p/I_t must be a number in [0, 1)")
+    return value
 
 
 def _parse_set(items: Sequence[str]) -> dict[str, float]:
@@ -136,8 +151,10 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         return fail(str(exc), code=1)
     except ImportError as exc:
         return fail(f"cannot write {out}: {exc} (Parquet needs pyarrow)")
+    except MemoryError:
+        return fail(f"not enough memory for {args.t_end:g} / {args.dt:g} samples; shorten --t-end or raise --dt")
     except OSError as exc:
-        return fail(f"cannot write {out}: {exc}")
+        return fail(f"cannot write {out}: {exc.strerror or exc}")
     except KeyboardInterrupt:
         return fail("interrupted", code=130)
     amp = (meas.theta_x**2 + meas.theta_y**2) ** 0.5
@@ -281,14 +298,28 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 
 
 def _cmd_fit(args: argparse.Namespace) -> int:
+    try:
+        return _fit(args)
+    except KeyboardInterrupt:
+        print("rotor-id fit: interrupted", file=sys.stderr)
+        return 130
+    except MemoryError:
+        print(f"rotor-id fit: error: not enough memory to fit {args.file}; decimate the record", file=sys.stderr)
+        return 1
+
+
+def _fit(args: argparse.Namespace) -> int:
     import json
 
     from .diagnosis import fit
     from .diagnosis.result import _jsonable
+    from .regression import RegressionSpec
 
     meas, _ = _load(args)
     model = _model_list(args.model, ())
+    RegressionSpec(effects=tuple(model))  # refuses a model that cannot be fitted (two effects, one tau)
     comp = fit(meas, model, ip=args.ip)
+    _check_finite_fit(comp, args.file)
     out = {
         "model": list(comp.model),
         "coefficients": comp.coefficient_dict(),
@@ -320,6 +351,17 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_finite_fit(comp, file) -> None:
+    """A fit whose numbers are not finite is an error, never a result (``RMS inf, R^2 nan``)."""
+    values = {"rms": comp.rms, "r2": comp.r2, "fit_percent": comp.fit_percent,
+              **{f"coefficient {c}": v for c, v in zip(comp.columns, comp.coefficients, strict=True)},
+              **{f"standard error {c}": v for c, v in zip(comp.columns, comp.standard_errors, strict=True)}}
+    bad = [k for k, v in values.items() if not math.isfinite(float(v))]
+    if bad:
+        raise ValueError(f"{file}: the fit is not finite ({', '.join(bad[:4])}): the data overflow the model's "
+                         "numbers; check the file for huge values")
+
+
 def _add_diagnose_parsers(sub) -> None:
     from .effects import EFFECTS
 
@@ -332,11 +374,11 @@ def _add_diagnose_parsers(sub) -> None:
                        help="comma-separated effects" + (" (default: unbalance,viscous_damping)" if cmd == "diagnose" else ""),
                        required=cmd == "fit")
         if cmd == "diagnose":
-            p.add_argument("--ip", type=float, default=None,
+            p.add_argument("--ip", type=_ip_value, default=None,
                            help="inertia ratio I_p/I_t (default: estimated from the data; a given one the "
                            "data contradict is kept, with a warning)")
         else:
-            p.add_argument("--ip", type=float, default=0.3, help="inertia ratio I_p/I_t (default 0.3)")
+            p.add_argument("--ip", type=_ip_value, default=0.3, help="inertia ratio I_p/I_t (default 0.3)")
         p.add_argument("--effect", action="append", metavar="MODULE:NAME",
                        help="a user effect: a column function or an Effect (repeatable)")
         p.add_argument("--json", action="store_true", help="print the result as one JSON object")

@@ -91,6 +91,13 @@ class RegressionSpec:
             get_effect(e)
         if len(set(effects)) != len(effects):
             raise ValueError(f"effects listed twice: {effects}")
+        owner: dict[str, str] = {}
+        for e in effects:  # two effects that estimate one physical quantity (tau) read 0 each
+            for p in EFFECTS[e].parameter_names:
+                if p in owner:
+                    raise ValueError(f"effects {owner[p]!r} and {e!r} both estimate {p!r} (the same physical "
+                                     "quantity, their columns are collinear): use one of them")
+                owner[p] = e
         if self.equation not in EQUATIONS:
             raise ValueError(f"equation must be one of {EQUATIONS}, got {self.equation!r}")
         known = {str(k): dict(v) for k, v in self.known.items()}
