@@ -17,7 +17,13 @@ from identifier._special import fdtrc
 
 from .regression import DEFAULT_EFFECTS, RegressionSpec, build_rows
 
-__all__ = ["WRAPPER_EFFECTS", "IdentificationCore", "IdentificationWrapper", "VectorIdentificationWrapper"]
+__all__ = [
+    "WRAPPER_EFFECTS",
+    "IdentificationCore",
+    "IdentificationWrapper",
+    "VectorIdentificationWrapper",
+    "keep_moving_rows",
+]
 
 #: Default effects of the wrapper: the environments randomise the stiffness scale,
 #: so it is estimated (``theta`` leaves ``y`` and ``k`` becomes one more effect).
@@ -274,6 +280,33 @@ def _relative_speed(data: np.ndarray) -> np.ndarray:
     return np.hypot(v_y, v_x)
 
 
+@njit(cache=True, error_model="numpy")
+def keep_moving_rows(data: np.ndarray, X: np.ndarray, y: np.ndarray, per: int, stick_speed: float) -> int:
+    """Compact the regression rows in place to the samples that carry information; returns their count.
+
+    Sample ``r`` owns rows ``per*r .. per*r + per - 1`` of ``X, y``.  Kept: samples that
+    are finite (a diverged env pads its last step with NaN) and where the disk slips on
+    the shaft, ``S > stick_speed`` (``S`` the relative speed, see :func:`_relative_speed`).
+    The identification wrapper's step and the on-line monitor (:mod:`rotor_env.monitor`)
+    both select their rows here, then update the factor with
+    :func:`identifier._kernels.update_blocks`: one core.
+    """
+    k = 0
+    for r in range(data.shape[0]):
+        finite = True
+        for c in range(data.shape[1]):
+            finite = finite and math.isfinite(data[r, c])
+        v_y = data[r, 7] + data[r, 2] * data[r, 4]
+        v_x = data[r, 6] - data[r, 2] * data[r, 5]
+        if finite and math.sqrt(v_y * v_y + v_x * v_x) > stick_speed:
+            for q in range(per):
+                if k != r * per + q:
+                    X[k, :] = X[r * per + q, :]
+                    y[k] = y[r * per + q]
+                k += 1
+    return k
+
+
 _N_MEAS = 10  # columns of a measurement sample (rotor_env.measurements.COLUMNS)
 _NO_OBS = np.empty(0, dtype=np.float32)
 _NO_MOMENT = np.zeros((1, 2))
@@ -386,21 +419,7 @@ def _step_kernel(spec: RegressionSpec, masks: np.ndarray, starts: np.ndarray, en
         X = np.empty((m * per, n))
         y = np.empty(m * per)
         build(data, ip, kc, mom, X, y)
-        # keep the rows of samples that are finite (a diverged env pads its last step
-        # with NaN) and where the disk slips on the shaft (see _relative_speed)
-        k = 0
-        for r in range(m):
-            finite = True
-            for c in range(data.shape[1]):
-                finite = finite and math.isfinite(data[r, c])
-            v_y = data[r, 7] + data[r, 2] * data[r, 4]
-            v_x = data[r, 6] - data[r, 2] * data[r, 5]
-            if finite and math.sqrt(v_y * v_y + v_x * v_x) > cfg[3]:
-                for q in range(per):
-                    if k != r * per + q:
-                        X[k, :] = X[r * per + q, :]
-                        y[k] = y[r * per + q]
-                    k += 1
+        k = keep_moving_rows(data, X, y, per, cfg[3])
         # the same block-by-block update as RecursiveQR.update_many (no histories)
         update_blocks(R, col_sq, sums, X[:k], y[:k], cfg[0])
         _write_features(R, col_sq, sums, masks, starts, ends, cfg, crit, ip, obs, out)
@@ -589,8 +608,17 @@ class VectorIdentificationWrapper(gym.vector.VectorWrapper):
 
     def step(self, actions):
         obs, reward, terminated, truncated, info = self.env.step(actions)
-        meas = np.asarray(info["measurements"], dtype=float)
         n_envs = len(self.cores)
+        if "measurements" in info:
+            meas = np.asarray(info["measurements"], dtype=float)
+        elif self._done.all():
+            # gymnasium's SyncVectorEnv merges the sub-envs' infos: on a step where every
+            # sub-env was reset (all ended together) only reset infos remain, which carry
+            # no measurements; no identifier steps then (each is reset below)
+            meas = np.zeros((n_envs, 0, _N_MEAS))
+        else:
+            stepping = np.flatnonzero(~self._done).tolist()
+            raise ValueError(f"info has no 'measurements' although sub-envs {stepping} stepped")
         if meas.ndim != 3 or meas.shape[0] != n_envs or meas.shape[2] != _N_MEAS:
             raise ValueError(f"measurements must have shape ({n_envs}, samples, {_N_MEAS}), got {meas.shape}")
         ips = self._ips(info)

@@ -1,0 +1,425 @@
+"""The on-line monitor: samples in, the identified model and alarms out (Python API).
+
+>>> mon = Monitor(effects=("unbalance", "asymmetry", "viscous_damping"))
+>>> for chunk in chunks:                       # (m, 10) arrays of rotor_env.measurements.COLUMNS
+...     for event in mon.update(chunk):
+...         print(event)                        # {"event": "appeared", "effect": "asymmetry", ...}
+>>> mon.save("state.npz"); mon = Monitor.load("state.npz")   # resumes bit for bit
+
+The identifier is the project's :class:`~rotor_env.wrappers.IdentificationCore` (both
+equations, forgetting or a sliding window); the compiled block loop
+(:mod:`rotor_env.monitor.kernel`) selects its rows and updates its factor with the
+core's own functions.  The sequential test and its threshold are derived in
+:mod:`rotor_env.monitor.detector`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from identifier.hac import chi2_log10_sf
+
+from ..effects import EFFECTS
+from ..io import UNIFORM_RTOL, MeasurementError
+from ..measurements import COLUMNS
+from ..regression import DEFAULT_EFFECTS, build_rows
+from ..wrappers import IdentificationCore
+from . import kernel as K
+from .detector import CusumDesign
+
+__all__ = ["Monitor", "MonitorConfig"]
+
+_STATE_VERSION = 1
+_N_COLS = len(COLUMNS)
+
+
+@dataclass(frozen=True)
+class MonitorConfig:
+    """Options of :class:`Monitor` (times in samples unless said otherwise).
+
+    effects: the model identified and watched, in nested order (library names).
+    ip: the inertia ratio the regression uses.
+    forgetting: ``lambda`` per *sample* (the memory is ``1/(1-lambda)`` samples); ignored
+        with ``window``.
+    window: a sliding window of this many samples instead of forgetting (rounded up to
+        whole blocks; the rows leaving it are downdated out of the factor).
+    arl0: target in-control average run length, samples between false alarms.
+    block: samples per block of evidence.
+    delta: the shift of the standardised block evidence the CUSUM is tuned for.
+    noise_floor: the equation error's standard deviation is taken as at least this
+        (noise-free simulated data: what is left is integration error).
+    stick_speed, stick_sigmas: a sample counts only where the disk's relative speed
+        exceeds ``max(stick_speed, stick_sigmas * its noise)`` (dry friction sticks it).
+    hac_lags: Bartlett lags (regression rows) of the residual's long-run variance.
+    identifiable_fraction: an effect's block counts only where the block alone sizes
+        a change of it to this fraction of what its plausible bounds allow.
+    calibration_blocks, calibration_memory: blocks before an effect's CUSUM runs, and
+        the memory of its in-control calibration (batch means).
+    restart: after an alarm the reference keeps this weight of its past.
+    status_every: time between status events (``None``: none).
+    """
+
+    effects: tuple[str, ...] = DEFAULT_EFFECTS
+    ip: float = 0.3
+    forgetting: float = 0.9995
+    window: int | None = None
+    arl0: float = 1e7
+    block: int = 200
+    delta: float = 2.0
+    noise_floor: float = 1e-4
+    stick_speed: float = 1e-4
+    stick_sigmas: float = 5.0
+    hac_lags: int = 20
+    identifiable_fraction: float = 0.1
+    calibration_blocks: int = 20
+    calibration_memory: int = 100
+    restart: float = 1e-3
+    status_every: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "effects", tuple(self.effects))
+        for e in self.effects:
+            if e not in EFFECTS:
+                raise ValueError(f"unknown effect {e!r}; known effects: {', '.join(sorted(EFFECTS))}")
+        checks = {
+            "ip": 0.0 <= self.ip < 1.0,
+            "forgetting": 0.0 < self.forgetting <= 1.0,
+            "arl0": self.arl0 > self.block,
+            "block": int(self.block) == self.block and self.block >= 20,
+            "delta": self.delta > 0,
+            "noise_floor": self.noise_floor >= 0,
+            "hac_lags": int(self.hac_lags) == self.hac_lags and 0 <= self.hac_lags < self.block,
+            "identifiable_fraction": self.identifiable_fraction > 0,
+            "restart": 0.0 < self.restart <= 1.0,
+        }
+        if self.window is not None:
+            checks["window"] = int(self.window) == self.window and self.window >= self.block
+        for name, ok in checks.items():
+            if not ok:
+                raise ValueError(f"monitor option {name} = {getattr(self, name)!r} is out of range")
+
+    @property
+    def window_blocks(self) -> int:
+        return 0 if self.window is None else -(-int(self.window) // self.block)
+
+
+def _effect_scale(name: str) -> float:
+    """The size of an effect its declared plausible bounds allow: the smallest finite half-range."""
+    spans = [(p.upper - p.lower) / 2.0 for p in EFFECTS[name].parameters
+             if math.isfinite(p.lower) and math.isfinite(p.upper)]
+    return min(spans) if spans else 1.0
+
+
+class Monitor:
+    """Sequential detection of effects that appear, change or disappear, on a sample stream.
+
+    ``update(chunk)`` takes an ``(m, 10)`` array (columns :data:`rotor_env.measurements.COLUMNS`,
+    uniformly sampled, continuing the stream) and returns the events it raised: dicts
+    ``{"event": "appeared" | "changed" | "disappeared", "effect", "t_alarm", "t_onset",
+    "value_before", "value_after", "evidence"}`` and, with ``status_every``, status
+    dicts.  Samples are processed in whole blocks; the rest waits for the next chunk
+    (the results do not depend on how the stream is cut).  A chunk that is not valid
+    raises :class:`~rotor_env.io.MeasurementError` naming its row, and changes nothing.
+    """
+
+    def __init__(self, config: MonitorConfig | None = None, **options: Any) -> None:
+        cfg = replace(config or MonitorConfig(), **options)
+        self.config = cfg
+        per_row = cfg.forgetting ** 0.5 if cfg.window is None else 1.0  # two rows per sample
+        self.core = IdentificationCore(cfg.effects, equation="both", forgetting=per_row, prior=0.0,
+                                       stick_speed=cfg.stick_speed, noise_floor=cfg.noise_floor)
+        self.core.ip = float(cfg.ip)
+        spec = self.core.spec
+        self.effects = tuple(spec.groups)
+        G, n = self.core._masks.shape
+        self._q = np.array([len(c) for c in spec.groups.values()], dtype=np.int64)
+        qmax = int(self._q.max())
+        self._cols = np.zeros((G, qmax), dtype=np.int64)
+        for g, names in enumerate(spec.groups.values()):
+            self._cols[g, : len(names)] = [spec.columns.index(c) for c in names]
+        self._scales = np.array([_effect_scale(e) for e in self.effects])
+        self.design = CusumDesign(cfg.arl0, cfg.block, G, cfg.delta)
+        self.threshold = self.design.threshold
+        self._cfg = np.zeros(K.N_CFG)
+        self._cfg[[K.C_LAMBDA, K.C_RTOL, K.C_FLOOR2, K.C_STICK, K.C_STICK_SIGMAS, K.C_IDENT_FRAC, K.C_K, K.C_H,
+                   K.C_CAL_BLOCKS, K.C_CAL_W, K.C_RESTART, K.C_BLOCK, K.C_LAGS, K.C_MIN_ROWS, K.C_WINDOW]] = [
+            per_row, self.core.estimator.rtol, cfg.noise_floor**2, cfg.stick_speed, cfg.stick_sigmas,
+            cfg.identifiable_fraction, cfg.delta / 2.0, self.threshold, cfg.calibration_blocks,
+            1.0 / cfg.calibration_memory, cfg.restart, cfg.block, cfg.hac_lags, 4 * n, cfg.window_blocks,
+        ]
+        wb = cfg.window_blocks
+        per = spec.rows_per_sample
+        self._arrays: dict[str, np.ndarray] = {
+            "core_state": self.core._state,
+            "gamma": np.zeros(cfg.hac_lags + 1),
+            "mon": np.zeros(K.N_MON),
+            "eff": np.zeros((G, K.N_EFF)),
+            "on_before": np.zeros((G, qmax)),
+            "on_se": np.zeros((G, qmax)),
+            "sumA": np.zeros((G, qmax, qmax)),
+            "sum_s": np.zeros((G, qmax)),
+            "sumV": np.zeros((G, qmax, qmax)),
+            "ring_X": np.zeros((max(wb, 1) if wb else 0, per * cfg.block, n)),
+            "ring_y": np.zeros((max(wb, 1) if wb else 0, per * cfg.block)),
+            "ring_n": np.zeros(2 + wb),
+            "pending": np.zeros((0, _N_COLS)),
+            # [samples seen, last t, dt (0: unknown), next status time]
+            "stream": np.array([0.0, math.nan, 0.0, math.nan]),
+        }
+        eff = self._arrays["eff"]
+        eff[:, K.E_Q] = self._q
+        for g, q in enumerate(self._q):
+            clip = stats.chi2.ppf(0.99, q)
+            eff[g, K.E_CLIP] = clip
+            # E[min(chi2_q, c)] = q F_{q+2}(c) + c (1 - F_q(c)): the winsorised mean under H0
+            eff[g, K.E_CWIN] = q * stats.chi2.cdf(clip, q + 2) + clip * stats.chi2.sf(clip, q)
+        self.events: list[dict] = []
+
+    # ------------------------------------------------------------------ the stream
+    def update(self, chunk: np.ndarray) -> list[dict]:
+        """Feed samples; returns the events (and status lines) they raised."""
+        data = self._validate(chunk)
+        a = self._arrays
+        stream = a["stream"]
+        if data.shape[0]:
+            t_all = data[:2, 0] if math.isnan(stream[1]) else np.concatenate([[stream[1]], data[:1, 0]])
+            if stream[2] == 0.0 and t_all.size > 1:
+                stream[2] = t_all[1] - t_all[0]
+            stream[0] += data.shape[0]
+            stream[1] = data[-1, 0]
+            if math.isnan(stream[3]) and self.config.status_every:
+                stream[3] = data[0, 0] + self.config.status_every
+        buf = np.concatenate([a["pending"], data]) if a["pending"].shape[0] else data
+        B = self.config.block
+        nb = buf.shape[0] // B
+        out: list[dict] = []
+        start = 0
+        while start < nb:
+            stop = nb
+            every = self.config.status_every
+            if every:
+                # cut at the block that reaches the next status time
+                ends = buf[np.arange(start, nb) * B + B - 1, 0]
+                hit = np.flatnonzero(ends >= stream[3])
+                if hit.size:
+                    stop = start + int(hit[0]) + 1
+            out.extend(self._process(buf[start * B : stop * B]))
+            if every and buf[stop * B - 1, 0] >= stream[3]:
+                out.append(self.status())
+                stream[3] += every * max(1.0, math.floor((buf[stop * B - 1, 0] - stream[3]) / every) + 1.0)
+            start = stop
+        a["pending"] = np.array(buf[nb * B :], dtype=float)
+        return out
+
+    def _validate(self, chunk: np.ndarray) -> np.ndarray:
+        data = np.asarray(chunk, dtype=float)
+        if data.ndim != 2 or data.shape[1] != _N_COLS:
+            raise MeasurementError(f"a chunk must have shape (samples, {_N_COLS}) with columns {COLUMNS}, "
+                                   f"got {data.shape}; the monitor was not changed")
+        bad = ~np.isfinite(data)
+        if bad.any():
+            r, c = np.argwhere(bad)[0]
+            raise MeasurementError(f"row {r} of the chunk, column {COLUMNS[c]!r}: {data[r, c]!r} is not finite; "
+                                   "the monitor was not changed")
+        stream = self._arrays["stream"]
+        t = data[:, 0]
+        if not math.isnan(stream[1]):
+            t = np.concatenate([[stream[1]], t])
+        step = np.diff(t)
+        if step.size:
+            first = 0 if math.isnan(stream[1]) else 1
+            if (step <= 0).any():
+                r = int(np.argmax(step <= 0))
+                raise MeasurementError(f"row {r + 1 - first} of the chunk, column 't': time {t[r + 1]!r} does not "
+                                       f"increase (previous {t[r]!r}); the monitor was not changed")
+            dt = stream[2] or float(step[0])
+            off = np.abs(step - dt) > UNIFORM_RTOL * dt
+            if off.any():
+                r = int(np.argmax(off))
+                raise MeasurementError(f"row {r + 1 - first} of the chunk, column 't': step {step[r]!r} where the "
+                                       f"stream's step is {dt!r} (samples missing?); the monitor was not changed")
+        return data
+
+    def _process(self, data: np.ndarray) -> list[dict]:
+        if not data.shape[0]:
+            return []
+        a = self._arrays
+        X, y = build_rows(self.core.spec, np.ascontiguousarray(data), self.core.ip)
+        est = self.core.estimator
+        events = np.zeros((data.shape[0] // self.config.block, K.N_EV_FIXED + 4 * self._cols.shape[1]))
+        n_ev = K.process_blocks(
+            data, X, y, self.core.spec.rows_per_sample, est.R, est._col_sq, est._sums, self.core._masks,
+            self._cols, self._scales, self._cfg, a["gamma"], a["mon"], a["eff"], a["on_before"], a["on_se"],
+            a["sumA"], a["sum_s"], a["sumV"], events, a["ring_X"], a["ring_y"], a["ring_n"])
+        out = [self._event(row) for row in events[:n_ev]]
+        self.events.extend(out)
+        return out
+
+    def _physical(self, g: int, coef: np.ndarray) -> dict[str, float]:
+        name = self.effects[g]
+        eff = EFFECTS[name]
+        full = np.zeros(len(eff.coefficients))
+        names = self.core.spec.groups[name]
+        for c, v in zip(names, coef, strict=True):
+            full[eff.coefficients.index(c)] = v
+        return {k: float(v) for k, v in eff.from_coefficients(full).items()}
+
+    def _event(self, row: np.ndarray) -> dict:
+        g = int(row[K.V_G])
+        q = int(self._q[g])
+        qm = self._cols.shape[1]
+        o = K.N_EV_FIXED
+        before, se_before = row[o : o + q], row[o + qm : o + qm + q]
+        delta, se_delta = row[o + 2 * qm : o + 2 * qm + q], row[o + 3 * qm : o + 3 * qm + q]
+        after = before + delta
+        se_after = np.sqrt(se_before**2 + se_delta**2)
+        # present = its coefficients differ from 0 by more than 3 standard errors
+        present_before = bool(np.any(np.abs(before) > 3.0 * se_before))
+        present_after = bool(np.any(np.abs(after) > 3.0 * se_after))
+        if present_after and not present_before:
+            kind = "appeared"
+        elif present_before and not present_after:
+            kind = "disappeared"
+        else:
+            kind = "changed"
+        name = self.effects[g]
+        eff = EFFECTS[name]
+        cols = self.core.spec.groups[name]
+        return {
+            "event": kind,
+            "effect": name,
+            "t_alarm": float(row[K.V_T]),
+            "t_onset": float(row[K.V_T_ONSET]),
+            "value_before": self._physical(g, before),
+            "value_after": self._physical(g, after),
+            "evidence": {
+                "cusum": float(row[K.V_S]),
+                "threshold": float(self.threshold),
+                "blocks": int(row[K.V_BLOCKS]),
+                "chi2": float(row[K.V_CHI]),
+                "dof": int(row[K.V_DOF]),
+                "log10_p": float(chi2_log10_sf(float(row[K.V_CHI]), int(row[K.V_DOF]))),
+                "calibration": float(row[K.V_KAPPA]),
+                "coefficients_before": dict(zip(cols, map(float, before), strict=True)),
+                "change": dict(zip(cols, map(float, delta), strict=True)),
+                "change_se": dict(zip(cols, map(float, se_delta), strict=True)),
+                "speed_onset": float(row[K.V_SPEED_ONSET]),
+                "speed_alarm": float(row[K.V_SPEED]),
+                "orders": list(eff.orders),
+                "signature": eff.signature,
+            },
+        }
+
+    # ------------------------------------------------------------------ state
+    @property
+    def samples(self) -> int:
+        """Samples received (processed or waiting in the last incomplete block)."""
+        return int(self._arrays["stream"][0])
+
+    @property
+    def t(self) -> float:
+        return float(self._arrays["mon"][K.M_LAST_T])
+
+    @property
+    def speed(self) -> float:
+        return float(self._arrays["mon"][K.M_LAST_SPEED])
+
+    @property
+    def noise_floor(self) -> float:
+        """Standard deviation of the equation error per row (pooled over the blocks so far)."""
+        return float(math.sqrt(max(self._arrays["gamma"][0], 0.0)))
+
+    @property
+    def cusum(self) -> dict[str, float]:
+        return {e: float(s) for e, s in zip(self.effects, self._arrays["eff"][:, K.E_S], strict=True)}
+
+    @property
+    def calibration(self) -> dict[str, float]:
+        return {e: float(max(1.0, s)) for e, s in zip(self.effects, self._arrays["eff"][:, K.E_KAPPA], strict=True)}
+
+    @property
+    def counted_blocks(self) -> dict[str, int]:
+        """Blocks that counted as evidence per effect (identifiable, calibrated)."""
+        return {e: int(s) for e, s in zip(self.effects, self._arrays["eff"][:, K.E_COUNTED], strict=True)}
+
+    def coefficients(self) -> dict[str, dict[str, float]]:
+        """The reference model's physical parameters per effect."""
+        coef, _, _ = self.core.significance()
+        out = {}
+        for g, name in enumerate(self.effects):
+            out[name] = self._physical(g, coef[self._cols[g, : self._q[g]]])
+        return out
+
+    def significant(self) -> dict[str, bool]:
+        """Each effect's partial F-test (tested last) on the reference window, ``p < 0.05``."""
+        _, _, sig = self.core.significance()
+        return {e: bool(s) for e, s in zip(self.effects, sig, strict=True)}
+
+    def status(self) -> dict:
+        return {"event": "status", "t": self.t, "speed": self.speed, "coefficients": self.coefficients(),
+                "significant": self.significant(), "noise_floor": self.noise_floor, "cusum": self.cusum}
+
+    def summary(self) -> dict:
+        """The end-of-stream summary (the last incomplete block is left unprocessed)."""
+        return {"event": "summary", "samples": self.samples, "t": self.t, "speed": self.speed,
+                "alarms": len(self.events),
+                "events": [{k: e[k] for k in ("event", "effect", "t_onset", "t_alarm")} for e in self.events],
+                "coefficients": self.coefficients(), "significant": self.significant(),
+                "noise_floor": self.noise_floor, "counted_blocks": self.counted_blocks,
+                "threshold": self.threshold, "arl0": self.config.arl0,
+                "unprocessed_samples": int(self._arrays["pending"].shape[0])}
+
+    # ------------------------------------------------------------------ save / restore
+    def save(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+        """Write the complete state to ``.npz`` (no pickle); refuses to overwrite by default."""
+        path = Path(path)
+        if path.suffix != ".npz":
+            raise ValueError(f"state files end in .npz, got {str(path)!r}")
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
+        meta = {"version": _STATE_VERSION, "config": asdict(self.config), "events": self.events}
+        tmp = path.with_name(path.name + ".part")
+        with open(tmp, "wb") as fh:
+            np.savez(fh, meta=np.array(json.dumps(meta)), **self._arrays)
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Monitor:
+        """Restore a state written by :meth:`save`; continuing equals an uninterrupted run."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as npz:
+                meta = json.loads(str(npz["meta"]))
+                arrays = {k: np.array(npz[k]) for k in npz.files if k != "meta"}
+        except (OSError, KeyError, ValueError, TypeError, EOFError) as exc:
+            raise ValueError(f"{path}: not a monitor state file ({exc})") from None
+        if not isinstance(meta, dict) or meta.get("version") != _STATE_VERSION:
+            raise ValueError(f"{path}: unsupported monitor state version")
+        known = {f.name for f in fields(MonitorConfig)}
+        config = {k: v for k, v in meta.get("config", {}).items() if k in known}
+        config["effects"] = tuple(config.get("effects", DEFAULT_EFFECTS))
+        mon = cls(MonitorConfig(**config))
+        for name, ref in mon._arrays.items():
+            got = arrays.get(name)
+            if got is None or (name != "pending" and got.shape != ref.shape) or got.dtype.kind != "f":
+                raise ValueError(f"{path}: array {name!r} is missing or does not match the configuration")
+            if name not in ("stream",) and not np.isfinite(got).all():
+                raise ValueError(f"{path}: array {name!r} holds non-finite values")
+        for name, ref in mon._arrays.items():
+            if name == "pending":
+                if arrays[name].ndim != 2 or arrays[name].shape[1] != _N_COLS:
+                    raise ValueError(f"{path}: array 'pending' does not have {_N_COLS} columns")
+                mon._arrays[name] = arrays[name].astype(float)
+            else:
+                ref[...] = arrays[name]  # in place: the core's estimator holds views of core_state
+        mon.events = list(meta.get("events", []))
+        return mon
