@@ -141,30 +141,35 @@ def order_vectors(
     t_mid = 0.5 * (times[1:] + times[:-1]) if n_blocks else np.empty(0)
     speed = np.abs(np.diff(marks)) / np.diff(times) if n_blocks else np.empty(0)
     bounds = np.searchsorted(t, times)
-    n_cols = 1 + (2 if real else 1) * len(orders)
     for j in range(n_blocks):
         a, b = bounds[j], bounds[j + 1]
-        if b - a < n_cols + 2:
-            continue
-        ph, xs = phi[a:b], x[a:b]
-        if real:
-            cols = [np.ones(b - a)]
-            for o in orders:
-                cols += [np.cos(o * ph), -np.sin(o * ph)]  # Re(X e^{i o phi}) = Re X cos - Im X sin
-            coef, *_ = np.linalg.lstsq(np.column_stack(cols), xs, rcond=None)
-            for q, o in enumerate(orders):
-                out[o][j] = coef[1 + 2 * q] + 1j * coef[2 + 2 * q]
-        else:
-            A = np.column_stack([np.ones(b - a)] + [np.exp(1j * o * ph) for o in orders if o != 0])
-            coef, *_ = np.linalg.lstsq(A, xs.astype(complex), rcond=None)
-            q = 1
-            for o in orders:
-                if o == 0:
-                    out[o][j] = coef[0]
-                else:
-                    out[o][j] = coef[q]
-                    q += 1
+        fitted = _fit_orders(phi[a:b], x[a:b], orders)
+        for o in orders:
+            out[o][j] = fitted[o]
     return t_mid, speed, out
+
+
+def _fit_orders(phi: np.ndarray, x: np.ndarray, orders: Sequence[int]) -> dict[int, complex]:
+    """Least squares of the samples against a constant and the ``orders`` of ``phi``: a
+    real ``x ≈ a0 + sum Re(X_n e^{i n phi})``, a complex ``x ≈ a0 + sum X_n e^{i n phi}``
+    (order 0 is ``a0``).  NaN with too few samples."""
+    real = not np.iscomplexobj(x)
+    n_cols = 1 + (2 if real else 1) * len([o for o in orders if o != 0])
+    if len(x) < n_cols + 2:
+        return {o: complex(np.nan, np.nan) for o in orders}
+    if real:
+        cols = [np.ones(len(x))]
+        for o in orders:
+            cols += [np.cos(o * phi), -np.sin(o * phi)]  # Re(X e^{i o phi}) = Re X cos - Im X sin
+        coef, *_ = np.linalg.lstsq(np.column_stack(cols), x, rcond=None)
+        return {o: complex(coef[1 + 2 * q], coef[2 + 2 * q]) for q, o in enumerate(orders)}
+    moving = [o for o in orders if o != 0]
+    A = np.column_stack([np.ones(len(x))] + [np.exp(1j * o * phi) for o in moving])
+    coef, *_ = np.linalg.lstsq(A, x.astype(complex), rcond=None)
+    out = {o: complex(coef[1 + q]) for q, o in enumerate(moving)}
+    if 0 in orders:
+        out[0] = complex(coef[0])
+    return out
 
 
 def phase_deg(X: np.ndarray, convention: str = "lag", *, unwrap: bool = True,
@@ -368,12 +373,11 @@ def plot_orbit(
         j = int(np.clip(np.searchsorted(times, tc, side="right") - 1, 0, len(times) - 2))
         ta, tb = times[j], times[j + 1]
         sel = (t >= ta) & (t <= tb)
-        tt, pp = np.concatenate([[ta], t[sel], [tb]]), np.concatenate([[marks[j]], phi[sel], [marks[j + 1]]])
+        tt = np.concatenate([[ta], t[sel], [tb]])
         xx, yy = np.interp(tt, t, x), np.interp(tt, t, y)
         speed = float(speed_from_rad(abs(marks[j + 1] - marks[j]) / (tb - ta), speed_unit))
-        _, _, vx = order_vectors(tt, xx, pp)
-        _, _, vy = order_vectors(tt, yy, pp)
-        X, Y = vx[1][0], vy[1][0]
+        # the 1X fit on the samples themselves (the interpolated ends only close the curve)
+        X, Y = _fit_orders(phi[sel], x[sel], (1,))[1], _fit_orders(phi[sel], y[sel], (1,))[1]
         colour = f"C{k}" if len(set(map(id, axes))) == 1 else "C0"
         when = f"t = {tc:.4g} {'' if time_unit == 'dimensionless' else time_unit}".rstrip()
         tag = f"{when}, {speed:.4g} {'(speed)' if speed_unit == 'dimensionless' else speed_unit}"

@@ -213,10 +213,11 @@ class DiagnosisFigures:
         fig, ax = self._ax(ax)
         comp = self.before if which == "before" else self.after
         m = self.data.meas
-        speeds, orders, amp = order_map(m.t, m.phi, m.phi_dot, complex_rows(comp.residual, self.equation))
+        u = self.plot_units()
+        speeds, orders, amp = order_map(m.t, m.phi, u.speed(m.phi_dot), complex_rows(comp.residual, self.equation))
         if amp.size:
             mesh = ax.pcolormesh(orders, speeds, np.log10(amp + 1e-12), shading="nearest", cmap="viridis")
-            fig.colorbar(mesh, ax=ax, label="log10 amplitude")
+            fig.colorbar(mesh, ax=ax, label="log10 amplitude (dimensionless moment)")
         for o in (-2, -1, 0, 1, 2):
             ax.axvline(o, color="w", lw=0.6, ls=":")
             ax.text(o, speeds.max() if amp.size else 1, f"{o}x", color="k", ha="center", va="bottom", fontsize=8)
@@ -236,7 +237,7 @@ class DiagnosisFigures:
             ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=min(3, len(lines)),
                       title="expected order lines (solid: added, dashed: lookalike)", title_fontsize=7)
         ax.set_xlabel("rotation order (+ forward, - backward)")
-        ax.set_ylabel("speed")
+        ax.set_ylabel(u.label("speed", u.speed_unit))
         ax.set_title(f"order map of the {which}-model residual")
         return fig
 
@@ -270,12 +271,13 @@ class DiagnosisFigures:
         r = _first_rows(comp.residual, self.equation)
         ac = autocorrelation(r, max_lag)
         dt = self.data.meas.dt
-        lags = np.arange(len(ac)) * dt
+        u = self.plot_units()
+        lags = np.arange(len(ac)) * dt * u.time_factor
         ax.plot(lags, ac, lw=1)
         b = 1.96 / math.sqrt(len(r))
         ax.axhspan(-b, b, color="grey", alpha=0.3, label="95 % bounds (white noise)")
-        ax.set_xlabel("lag (time)")
-        ax.set_ylabel("autocorrelation")
+        ax.set_xlabel(u.label("lag", u.time_unit))
+        ax.set_ylabel("autocorrelation (normalised)")
         ax.legend(fontsize=8)
         ax.set_title(f"residual autocorrelation ({which} model)")
         return fig
