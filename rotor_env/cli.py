@@ -119,10 +119,15 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     try:
-        if out.exists() and not args.force:
-            raise _UsageError(f"{out} already exists; use --force to overwrite it")
         if out.is_dir():
             raise _UsageError(f"{out} is a directory, not an output file")
+        if out.suffix.lower() not in (".csv", ".parquet"):
+            raise _UsageError(f"{out}: a measurement file is .csv or .parquet, not {out.suffix or 'without a suffix'}")
+        if out.exists() and not args.force:
+            raise _UsageError(f"{out} already exists; use --force to overwrite it")
+        from .outputs import check_writable
+
+        check_writable(out, overwrite=args.force)  # a read-only folder: said before simulating
         if not out.parent.is_dir():
             raise _UsageError(f"cannot write {out}: directory {out.parent} does not exist")
         values = _load_params_file(args.params) if args.params else {}

@@ -243,11 +243,18 @@ def compare(
     onsets = dict(onsets or {})
     splits = tuple(e for e in splits if e in onsets)
     spec, X, y, _, columns, groups = _design(data, model, known or {}, onsets, splits)
+    _check_finite_rows(data, X, y, spec.rows_per_sample)
     est = RecursiveQR(columns=columns, groups=groups).fit(X, y)
     coef = est.coefficients()
-    resid = y - X @ coef
-    J = float(resid @ resid)
-    tss = float(np.sum((y - y.mean()) ** 2))
+    with np.errstate(over="ignore", invalid="ignore"):
+        resid = y - X @ coef
+        J = float(resid @ resid)
+        tss = float(np.sum((y - y.mean()) ** 2))
+    if not (np.isfinite(coef).all() and math.isfinite(J) and math.isfinite(tss)):
+        r = int(np.argmax(~np.isfinite(resid) | (np.abs(resid) == np.abs(resid).max())))
+        raise ValueError(f"{data.full.source}: the fit of {', '.join(model)} is not finite (residual energy {J:.3g}): "
+                         f"the values near t = {float(data.meas.t[r // spec.rows_per_sample]):.6g} overflow the model's "
+                         "numbers")
     physical, physical_before = _physical_values(spec, columns, coef, splits)
     sig = est.effect_tests().to_dict()
     comp = Comparison(
@@ -262,6 +269,17 @@ def compare(
     if simulate:
         _free_run(comp, data, spec.known)
     return comp
+
+
+def _check_finite_rows(data: _Data, X: np.ndarray, y: np.ndarray, per: int) -> None:
+    """Every regression row finite, and small enough that its square is (the energies)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        bad = ~(np.isfinite(X).all(axis=1) & np.isfinite(y)) | (np.abs(y) > 1e150) | (np.abs(X) > 1e150).any(axis=1)
+    if bad.any():
+        r = int(np.argmax(bad))
+        raise ValueError(f"{data.full.source}: the model's regression is not finite at t = "
+                         f"{float(data.meas.t[r // per]):.6g} (sample {data.window_start + r // per} of the record): "
+                         "a value there overflows the effects' products; check it")
 
 
 def make_robust(data: _Data, comp: Comparison, alpha: float = 0.05) -> Comparison:
