@@ -27,7 +27,12 @@ from rotor_env.diagnosis import diagnose
 from rotor_env.params import Crack, RotorParams
 from rotor_env.simulator import simulate
 
-HEADINGS = ("Summary", "Compare", "Where it fails", "Which effect is missing", "Before and after")
+HEADINGS = ("Summary", "Compare", "Where it fails", "Which effect is missing", "Before and after",
+            "Bode and polar plots", "Orbits", "Waterfall", "Campbell diagram", "Parameter tracks")
+#: the embedded figures, in the page's order (DiagnosisFigures.FIGURES holds them all)
+FIGURES = ("compare", "residual", "order_map", "autocorrelation", "candidates", "before_after", "residual_after",
+           "bode", "polar", "orbit", "waterfall", "campbell", "parameter_tracks")
+PAGE_HEIGHT = 9000
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
 
@@ -45,9 +50,11 @@ def _chromium() -> str:
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory) -> Path:
-    """The walkthrough's case, shortened: a crack at t = 250 in a rotor with dry friction."""
-    params = RotorParams().replace(D=0.0, k30=0.0, k21=0.0, k12=0.0, k03=0.0, crack=Crack(250.0, 0.05))
-    res = diagnose(simulate(params, noise=5e-4, seed=1), ("unbalance", "viscous_damping", "structural_damping"))
+    """The walkthrough's case, shortened: a crack at t = 100 in a rotor with dry friction,
+    run up twice as fast with half the samples."""
+    params = RotorParams().replace(D=0.0, k30=0.0, k21=0.0, k12=0.0, k03=0.0, crack=Crack(100.0, 0.05))
+    meas = simulate(params, t_end=160.0, dt=0.04, run_up=0.02, noise=5e-4, seed=1)
+    res = diagnose(meas, ("unbalance", "viscous_damping", "structural_damping"))
     assert res.missing == ["asymmetry"]
     return res.report(tmp_path_factory.mktemp("report") / "report.html")
 
@@ -91,7 +98,8 @@ def test_report_is_self_contained(report):
     external = [(t, a, v[:60]) for t, a, v in refs.urls if not v.startswith(("data:", "#"))]
     assert not external, f"external references in the report: {external}"
     imgs = [v for t, a, v in refs.urls if t == "img" and a == "src"]
-    assert len(imgs) == 6 and all(v.startswith("data:image/png;base64,") for v in imgs)
+    assert len(imgs) == len(FIGURES) and all(v.startswith("data:image/png;base64,") for v in imgs)
+    assert re.findall(r'<img alt="(\w+)"', text) == list(FIGURES)
     assert not re.search(r"<link\b|<script\b[^>]*\bsrc=|@import|url\(\s*['\"]?(?!data:)", text, re.I)
     assert [h for h in refs.headings if h in HEADINGS] == list(HEADINGS)
 
@@ -109,12 +117,12 @@ def _run(args: list[str], profile: Path) -> subprocess.CompletedProcess:
 def test_report_renders_in_headless_chromium(report, tmp_path):
     url = report.resolve().as_uri()
     png = tmp_path / "shot.png"
-    proc = _run([f"--screenshot={png}", "--window-size=1200,3000", url], tmp_path / "profile1")
+    proc = _run([f"--screenshot={png}", f"--window-size=1200,{PAGE_HEIGHT}", url], tmp_path / "profile1")
     assert png.exists(), f"no screenshot (exit {proc.returncode}): {proc.stderr[-2000:]}"
     import matplotlib.image as mpimg
 
     img = mpimg.imread(png)[..., :3]  # floats in [0, 1]
-    assert img.shape[:2] == (3000, 1200)
+    assert img.shape[:2] == (PAGE_HEIGHT, 1200)
     assert float(img.std()) > 0.05, "the screenshot is (nearly) one colour"
     colours = np.unique((img.reshape(-1, 3) * 255).astype(np.uint8), axis=0)
     assert len(colours) > 200, f"only {len(colours)} distinct colours: are the figures rendered?"
@@ -122,9 +130,13 @@ def test_report_renders_in_headless_chromium(report, tmp_path):
     rgb = img.reshape(-1, 3)
     saturated = (rgb.max(axis=1) - rgb.min(axis=1)) > 0.3
     assert saturated.mean() > 0.005, f"only {saturated.mean():.2%} coloured pixels"
-    # the figures are spread down the page: both halves carry ink
-    for half in (img[:1500], img[1500:]):
-        assert (half.mean(axis=2) < 0.5).mean() > 0.002
+    # the figures are spread down the page: every third of it carries ink, and the field views
+    # (Bode ... parameter tracks, the lower part) draw colour too
+    third = PAGE_HEIGHT // 3
+    for part in (img[:third], img[third:2 * third], img[2 * third:]):
+        assert (part.mean(axis=2) < 0.5).mean() > 0.002
+    lower = img[third:].reshape(-1, 3)
+    assert ((lower.max(axis=1) - lower.min(axis=1)) > 0.3).mean() > 0.005
 
     proc = _run(["--dump-dom", url], tmp_path / "profile2")
     assert proc.returncode == 0, proc.stderr[-2000:]
