@@ -117,25 +117,26 @@ def order_track(
         starts = np.asarray(at, dtype=float) - 0.5 * span
         starts = starts[(starts >= phi[0]) & (starts + span <= phi[-1])]
     stops = starts + span
-    i0 = np.searchsorted(phi, starts)
-    i1 = np.searchsorted(phi, stops)
-    t_mid = np.empty(len(starts))
-    speed = np.empty(len(starts))
-    out = {n: np.empty((len(starts), xs.shape[1]), dtype=complex) for n in orders}
-    for b, (a, e, lo, hi) in enumerate(zip(starts, stops, i0, i1, strict=True)):
-        # the block's samples plus its two ends, interpolated in phi
-        ph = np.concatenate(([a], phi[lo:hi], [e]))
-        tt = np.interp(ph, phi, t)
-        seg = np.empty((len(ph), xs.shape[1]), dtype=xs.dtype)
-        for j in range(xs.shape[1]):
-            seg[:, j] = np.interp(ph, phi, xs[:, j].real) + (
-                1j * np.interp(ph, phi, xs[:, j].imag) if np.iscomplexobj(xs) else 0.0)
-        dphi = np.diff(ph)
-        for n in orders:
-            f = seg * np.exp(-1j * n * ph)[:, None]
-            out[n][b] = np.sum(0.5 * (f[1:] + f[:-1]) * dphi[:, None], axis=0) / (math.pi * revolutions)
-        t_mid[b] = 0.5 * (tt[0] + tt[-1])
-        speed[b] = span / (tt[-1] - tt[0])
+    # cumulative trapezoid of x e^{-i n phi} in phi; a block's integral is the difference
+    # of the cumulative integral at its two ends, each end interpolated inside its sample
+    # interval (the same trapezoid as on the block's samples plus its interpolated ends)
+    dphi = np.diff(phi)
+    t_mid = 0.5 * (np.interp(starts, phi, t) + np.interp(stops, phi, t))
+    speed = span / (np.interp(stops, phi, t) - np.interp(starts, phi, t))
+    out = {}
+    for n in orders:
+        rot = np.exp(-1j * n * phi)[:, None]
+        F = xs * rot
+        cum = np.concatenate([np.zeros((1, xs.shape[1]), dtype=complex),
+                              np.cumsum(0.5 * (F[1:] + F[:-1]) * dphi[:, None], axis=0)])
+        ends = []
+        for edge in (starts, stops):
+            i = np.clip(np.searchsorted(phi, edge, side="right") - 1, 0, len(phi) - 2)
+            frac = ((edge - phi[i]) / (phi[i + 1] - phi[i]))[:, None]
+            x_e = xs[i] + frac * (xs[i + 1] - xs[i])
+            f_e = x_e * np.exp(-1j * n * edge)[:, None]
+            ends.append(cum[i] + 0.5 * (F[i] + f_e) * (edge - phi[i])[:, None])
+        out[n] = (ends[1] - ends[0]) / (math.pi * revolutions)
     if one:
         out = {n: v[:, 0] for n, v in out.items()}
     return OrderTrack(t_mid, speed, out)
@@ -253,7 +254,7 @@ def load_vector_table(
         r = int(np.argmax(speed <= 0))
         raise VectorTableError(f"{path}, line {lines[r]}, column {header[col[speed_col]]!r}: speed "
                                f"{data[r, col[speed_col]]!r} is not positive")
-    for name, v in probes.items():
+    for v in probes.values():
         amp = data[:, v[1][0]]
         if (amp < 0).any():
             r = int(np.argmax(amp < 0))

@@ -1,0 +1,276 @@
+"""Diagnosis from order-tracked 1X vectors: compare, where it fails, what is missing.
+
+The same loop as the waveform diagnosis, on the synchronous model of
+:mod:`.synchronous`:
+
+1. fit the start model (damping and unbalance; ``w_ref`` carries the stiffness);
+2. the noise floor of the vectors from their row-to-row roughness: for independent
+   complex noise of variance ``s^2`` per vector, the second difference across rows has
+   ``E|d2|^2 = 6 s^2`` and ``median |d2|^2 = 6 s^2 ln 2`` (robust to the peak and the
+   ripples, which occupy few rows);
+3. each candidate that shows in 1X data (bow, support anisotropy, cross-coupled
+   stiffness, probe runout) is fitted in turn; it is added when its parameters are
+   significant by a HAC Wald test (the residuals of neighbouring rows are correlated:
+   :mod:`identifier.hac`, scores summed per row), plausible (the effect's declared bounds),
+   and it removes at least 10 % of the residual energy above the floor; the best one is
+   added and the search repeats;
+4. the verdict compares the final residual RMS with the floor (``explained`` within 1.5x).
+
+Critical speeds (rpm) and damping ratios come from the fitted model's eigenvalues.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from identifier.hac import hac_covariance, wald_test
+
+from ..effects import get_effect
+from ..measurements.vectors import SPEED_UNITS, VectorTable, to_phase
+from .synchronous import RUNOUT, SynchronousModel, VectorFit, fit_vectors
+from .verdict import FLOOR_RATIO, verdict_of
+
+__all__ = ["VECTOR_CANDIDATES", "VECTOR_MODEL", "VectorDiagnosis", "diagnose_vectors", "vector_noise_floor"]
+
+VECTOR_MODEL: tuple[str, ...] = ("viscous_damping", "unbalance")
+VECTOR_CANDIDATES: tuple[str, ...] = ("shaft_bow", RUNOUT, "support_anisotropy", "cross_coupled_stiffness")
+#: a candidate must remove this share of the residual energy above the floor
+MIN_GAIN = 0.10
+#: and be significant at this level (HAC Wald test), and stricter than alpha when alpha is loose
+LOG10_P_MAX = -3.0
+
+
+def vector_noise_floor(table: VectorTable) -> float:
+    """RMS of the noise per complex vector, from the rows' second differences (see module doc)."""
+    Y = table.vectors[1]
+    d2 = Y[2:] - 2 * Y[1:-1] + Y[:-2]
+    p2 = np.abs(d2[np.isfinite(d2)]) ** 2
+    if p2.size == 0:
+        return float("nan")
+    return float(math.sqrt(np.median(p2) / (6.0 * math.log(2.0))))
+
+
+def _time_major(fit: VectorFit) -> tuple[np.ndarray, np.ndarray, int]:
+    """Jacobian and residual reordered row by row (re, im of each probe), rows per speed."""
+    valid = np.isfinite(fit.table.vectors[1])
+    n = int(valid.sum())
+    r = fit.residual[valid]
+    order = np.empty(2 * n, dtype=int)
+    order[0::2] = np.arange(n)
+    order[1::2] = np.arange(n) + n
+    resid = np.concatenate([r.real, r.imag])[order]
+    J = fit.jacobian[order]
+    per = 2 * valid.shape[1] if valid.all() else 2
+    return J, resid, per
+
+
+def _wald(fit: VectorFit, effect: str) -> tuple[float, float]:
+    """HAC Wald test that the effect's parameters are at their null (zero)."""
+    J, resid, per = _time_major(fit)
+    idx = [i for i, nm in enumerate(fit.param_names) if nm.startswith(f"{effect}[")]
+    if not idx:
+        return float("nan"), 0.0
+    cov = hac_covariance(J, resid, rows_per_time=per)
+    return wald_test(fit.params[idx], cov[np.ix_(idx, idx)])
+
+
+def _plausible(fit: VectorFit, effect: str) -> tuple[bool, str]:
+    if effect == RUNOUT:
+        return True, ""
+    values = fit.values()[effect]
+    for p in get_effect(effect).parameters:
+        if p.name not in values or fit.model.kinds[effect] == "forcing":
+            continue  # forcing amplitudes are in the table's unit: no dimensionless bound applies
+        v = values[p.name]
+        if not (p.lower <= v <= p.upper):
+            return False, f"{p.name} = {v:.4g} outside its plausible range [{p.lower:g}, {p.upper:g}] ({p.bounds_reason})"
+    return True, ""
+
+
+@dataclass
+class VectorDiagnosis:
+    """What a vector table says: the fits before and after, criticals, the verdict."""
+
+    table: VectorTable
+    before: VectorFit
+    after: VectorFit
+    missing: list[str]
+    noise_floor: float
+    tested: list[dict] = field(default_factory=list)
+    rejected: list[dict] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    phase: str = "lag"
+
+    @property
+    def verdict(self) -> str:
+        return verdict_of(bool(self.missing), self.after.rms / self.noise_floor if self.noise_floor > 0 else math.inf)
+
+    def unexplained_bands(self) -> list[dict]:
+        """Speed bands (rpm) where the final residual is above 1.5x the floor."""
+        mag = np.sqrt(np.nanmean(np.abs(self.after.residual) ** 2, axis=1))
+        bad = mag > FLOOR_RATIO * self.noise_floor * 2.0
+        rpm = self.table.rpm
+        out, k = [], 0
+        while k < len(bad):
+            if bad[k]:
+                j = k
+                while j + 1 < len(bad) and bad[j + 1]:
+                    j += 1
+                out.append({"rpm_from": float(min(rpm[k], rpm[j])), "rpm_to": float(max(rpm[k], rpm[j])),
+                            "rms": float(np.sqrt(np.mean(mag[k : j + 1] ** 2)))})
+                k = j + 1
+            else:
+                k += 1
+        return sorted(out, key=lambda d: -d["rms"])[:5]
+
+    def to_dict(self) -> dict:
+        ratio = self.after.rms / self.noise_floor if self.noise_floor > 0 else None
+        return {
+            "source": self.table.source,
+            "kind": "vectors",
+            "amplitude_unit": self.table.amp_unit,
+            "probes": list(self.table.probes),
+            "method": self.after.method,
+            "start_model": list(self.before.model.names),
+            "model": list(self.after.model.names),
+            "missing": list(self.missing),
+            "verdict": self.verdict,
+            "criticals": [{"rpm": c["rpm"], "damping_ratio": c["damping_ratio"]} for c in self.after.criticals],
+            "criticals_before": [{"rpm": c["rpm"], "damping_ratio": c["damping_ratio"]}
+                                 for c in self.before.criticals],
+            "rms_before": self.before.rms,
+            "rms_after": self.after.rms,
+            "noise_floor": self.noise_floor,
+            "rms_ratio_before": self.before.rms / self.noise_floor if self.noise_floor > 0 else None,
+            "rms_ratio_after": ratio,
+            "natural_frequency_rpm": self.after.w_ref / SPEED_UNITS["rpm"],
+            "physical": _jsonable(self.after.values()),
+            "candidates": self.tested,
+            "rejected": self.rejected,
+            "unexplained": self.unexplained_bands() if self.verdict in ("partly_explained", "unexplained") else [],
+            "notes": list(self.notes),
+            "standard_errors_kind": "HAC (Newey-West, Bartlett kernel, Andrews bandwidth), scores summed per row",
+        }
+
+    def to_json(self, **kwargs) -> str:
+        return json.dumps(_jsonable(self.to_dict()), **kwargs)
+
+    def summary(self) -> str:
+        d = self.to_dict()
+        u = self.table.amp_unit
+        lines = [f"order-tracked vectors: {self.table.source} ({len(self.table.speed)} speeds, "
+                 f"{len(self.table.probes)} probe(s), {self.after.method} model)"]
+        for c in d["criticals"]:
+            lines.append(f"critical speed {c['rpm']:.1f} rpm, damping ratio {c['damping_ratio']:.4f}")
+        lines.append(f"start model ({', '.join(self.before.model.names)}): residual RMS {self.before.rms:.4g} {u} "
+                     f"({d['rms_ratio_before']:.3g}x the noise floor {self.noise_floor:.3g} {u})")
+        for m in self.missing:
+            lines.append(f"+ {m}: {_cause(m)}")
+        lines.append(f"final model ({', '.join(self.after.model.names)}): residual RMS {self.after.rms:.4g} {u} "
+                     f"({d['rms_ratio_after']:.3g}x the floor)")
+        lines.append(f"verdict: {self.verdict}")
+        for b in d["unexplained"]:
+            lines.append(f"  not explained at {b['rpm_from']:.0f}-{b['rpm_to']:.0f} rpm (RMS {b['rms']:.3g} {u})")
+        for r in self.rejected:
+            lines.append(f"  rejected {r['effect']}: {r['rule']}")
+        lines += [f"note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+    # ---------------------------------------------------------------- figures
+    def bode_data(self) -> tuple[np.ndarray, dict, dict]:
+        """rpm, measured vectors per probe, model vectors (before/after) per probe."""
+        meas = {p: self.table.vectors[1][:, j] for j, p in enumerate(self.table.probes)}
+        models = {"before": {p: self.before.predicted[:, j] for j, p in enumerate(self.table.probes)},
+                  "after": {p: self.after.predicted[:, j] for j, p in enumerate(self.table.probes)}}
+        return self.table.rpm, meas, models
+
+
+def _cause(name: str) -> str:
+    if name == RUNOUT:
+        return "probe runout: a constant 1X vector (mechanical/electrical runout of the probe track), seen at slow roll"
+    return get_effect(name).cause
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def diagnose_vectors(
+    table: VectorTable,
+    *,
+    ip: float = 0.0,
+    model: Sequence[str] = VECTOR_MODEL,
+    candidates: Sequence[str] = VECTOR_CANDIDATES,
+    alpha: float = 0.05,
+    method: str = "auto",
+    max_added: int = 3,
+    phase: str = "lag",
+) -> VectorDiagnosis:
+    """Fit ``model`` to the table's 1X vectors and add the missing effects one by one."""
+    base_effects = tuple(e for e in model if e != RUNOUT)
+    start_model = SynchronousModel(base_effects, ip=ip, runout=RUNOUT in model)
+    before = fit_vectors(table, start_model, method=method)
+    floor = vector_noise_floor(table)
+    notes = list(table.notes)
+    if before.method == "transient":
+        notes.append("transient model: the run simulated along the table's speed profile and order-tracked per "
+                     "revolution (the quasi-steady response differs by more than 1 % of the peak at this sweep rate)")
+    elif table.t is not None:
+        notes.append("quasi-steady model: within 1 % of the transient one at this sweep rate")
+    current, missing, tested, rejected = before, [], [], []
+    log10_alpha = min(math.log10(alpha), LOG10_P_MAX)
+    remaining = [c for c in candidates if c not in current.model.names]
+    while remaining and len(missing) < max_added:
+        if current.rms <= FLOOR_RATIO * floor:
+            break
+        excess = current.rms ** 2 - floor ** 2
+        best = None
+        for cand in remaining:
+            try:
+                fit = fit_vectors(table, current.model.with_effect(cand), method=current.method, start=current)
+            except (ValueError, FloatingPointError) as exc:
+                rejected.append({"effect": cand, "rule": f"cannot be fitted: {exc}"})
+                continue
+            F, log10_p = _wald(fit, cand)
+            gain = (current.rms ** 2 - fit.rms ** 2) / excess if excess > 0 else 0.0
+            ok, why = _plausible(fit, cand)
+            entry = {"effect": cand, "F": F, "log10_p": log10_p, "rms": fit.rms, "gain": gain,
+                     "plausible": ok}
+            tested.append(entry)
+            if log10_p > log10_alpha:
+                rule = f"not significant (HAC Wald log10 p = {log10_p:.3g})"
+            elif gain < MIN_GAIN:
+                rule = f"removes only {100 * gain:.1f} % of the residual energy above the floor"
+            elif not ok:
+                rule = f"implausible: {why}"
+            else:
+                rule = None
+            if rule is not None:
+                rejected.append({"effect": cand, "rule": rule})
+                continue
+            if best is None or fit.rms < best[1].rms:
+                best = (cand, fit)
+        if best is None:
+            break
+        missing.append(best[0])
+        current = best[1]
+        remaining = [c for c in remaining if c != best[0]]
+        # an effect rejected earlier may be accepted once another is in: keep only the last reasons
+        rejected = [r for r in rejected if r["effect"] in remaining]
+    amp, _ = to_phase(table.vectors[1], phase)
+    if floor > 0 and np.nanmax(amp) < 3 * floor:
+        notes.append("the 1X amplitude hardly rises above the noise: the critical is not excited in this run")
+    return VectorDiagnosis(table, before, current, missing, floor, tested, rejected, notes, phase)

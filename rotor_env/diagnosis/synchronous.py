@@ -1,0 +1,617 @@
+"""The run-up model's synchronous (1X) response, fitted to order-tracked vectors.
+
+What condition-monitoring systems export for a start-up or coast-down is the 1X vector
+of each probe against speed.  This module predicts those vectors from the same effect
+declarations the simulator and the regression read (:mod:`rotor_env.effects`), and
+fits them.
+
+The model
+---------
+In the model's dimensionless time ``t' = t w_ref`` (``w_ref`` the non-rotating natural
+frequency, a parameter of the fit: it carries the stiffness) the tilt — or, with
+``ip = 0``, the translation (Jeffcott) — obeys ``q'' = a(q, q', phi) `` with the
+declared effects' moments.  An effect whose moment does not depend on the state is a
+*forcing* (unbalance, bow): the response is linear in its coefficients, which are
+solved by linear least squares for every trial of the others (variable projection).
+The other effects are *structural* (damping, support anisotropy, cross-coupled
+stiffness): nonlinear parameters of the fit, with ``w_ref``.  Probe runout is a
+measurement term: a constant vector per probe (the slow-roll vector), also linear.
+
+A probe mounted at angle ``alpha`` (from the reference, in the direction of rotation)
+reads ``p = u cos(alpha) + v sin(alpha)`` with ``u = th_y``, ``v = th_x`` (docs/PHYSICS.md
+1.2: ``z = u + i v`` whirls forward as ``e^{+i phi}``); its 1X vector (``lead``
+convention, :mod:`rotor_env.measurements.vectors`) is ``P = Q_u cos(alpha) + Q_v sin(alpha)``.
+
+Quasi-steady or transient
+-------------------------
+*Quasi-steady*: at each speed the steady-state response
+``(-W^2 I - A_q - i W A_w) Q = F`` of the model linearised at that speed.  *Transient*:
+the model simulated (RK4, the simulator's compiled kernel) along the table's speed
+profile — the time column gives the acceleration — and order-tracked one revolution at a
+time at each row, as the data were.  At real start-up rates (e.g. 230 rpm/s through
+1650 rpm with zeta = 0.02) the peak is delayed and lowered and ripples (free vibration at
+the natural frequency beating against 1X) follow it: only the transient carries them.
+``method="auto"`` compares the two at the first fit and keeps the quasi-steady one only
+where it is within 1 % of the peak everywhere (it is faster).
+
+Critical speeds and damping ratios
+----------------------------------
+The eigenvalues ``lambda`` of the linearised model at speed ``W``; a critical is a speed
+where a branch's whirl frequency ``|Im lambda|`` equals ``W`` (the 1x line crosses the
+Campbell diagram) on a mode that whirls forward at least in part (an isotropic rotor's
+backward mode is not excited by unbalance); its damping ratio is ``-Re lambda / |lambda|``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+from scipy.optimize import brentq, least_squares
+
+from ..effects import EFFECTS, get_effect
+from ..measurements.vectors import SPEED_UNITS, VectorTable, order_track
+from ..simulator import compile_accel, integrate_profile, smooth_effects
+
+__all__ = [
+    "RUNOUT",
+    "VECTOR_EFFECTS",
+    "SynchronousModel",
+    "VectorFit",
+    "critical_speeds",
+    "fit_vectors",
+]
+
+#: the measurement term "probe runout": a constant 1X vector per probe
+RUNOUT = "runout"
+#: effects that show in 1X data and that the synchronous model can carry
+VECTOR_EFFECTS: tuple[str, ...] = (
+    "viscous_damping", "unbalance", "shaft_bow", "support_anisotropy", "cross_coupled_stiffness",
+)
+#: quasi-steady is used only where it is within this fraction of the peak of the transient
+QUASI_STEADY_TOL = 0.01
+#: the record starts this many revolutions before the first row (initial transient settles)
+LEAD_IN_REVS = 2.0
+
+
+def _classify(name: str) -> str:
+    """'forcing' (moment independent of the state), 'structural' (linear in the state,
+    fixed frame) — or a clear error for an effect the 1X model cannot carry."""
+    eff = get_effect(name)
+    if eff.dry_friction:
+        raise ValueError(f"effect {name!r} (dry friction) is non-linear: not identifiable from 1X vectors")
+    rng = np.random.default_rng(0)
+    cols = eff.columns
+    base = [np.array(cols(p, 1.3, 0.0, 0.0, 0.0, 0.0, 0.0, 0.2), dtype=float) for p in (0.3, 1.9)]
+    states = rng.normal(size=(2, 4))
+    if all(np.allclose(np.array(cols(0.3, 1.3, 0.0, *s, 0.2)), base[0]) for s in states):
+        return "forcing"
+    lin = []
+    for phi in (0.3, 1.9):
+        s = states[0]
+        a = np.array(cols(phi, 1.3, 0.0, *s, 0.2)) - np.array(cols(phi, 1.3, 0.0, 0, 0, 0, 0, 0.2))
+        b = np.array(cols(phi, 1.3, 0.0, *(2 * s), 0.2)) - np.array(cols(phi, 1.3, 0.0, 0, 0, 0, 0, 0.2))
+        lin.append(a)
+        if not np.allclose(b, 2 * a) or np.abs(np.array(cols(phi, 1.3, 0.0, 0, 0, 0, 0, 0.2))).max() > 0:
+            raise ValueError(f"effect {name!r} is non-linear or also a forcing: the 1X model cannot carry it")
+    if not np.allclose(lin[0], lin[1]):
+        raise ValueError(f"effect {name!r} turns with the shaft (its stiffness depends on the spin angle): "
+                         "its 1X response needs the full waveform, not a vector table")
+    return "structural"
+
+
+@dataclass(frozen=True)
+class SynchronousModel:
+    """The effects of a 1X model (``stiffness`` is implicit: ``w_ref`` carries it).
+
+    ``runout``: a constant vector per probe is part of the model.
+    """
+
+    effects: tuple[str, ...]
+    ip: float = 0.0
+    runout: bool = False
+    kinds: dict[str, str] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        eff = tuple(e for e in self.effects if e != "stiffness")
+        object.__setattr__(self, "effects", eff)
+        if not 0.0 <= self.ip < 1.0:
+            raise ValueError(f"ip must be in [0, 1), got {self.ip}")
+        object.__setattr__(self, "kinds", {e: _classify(e) for e in eff})
+
+    @property
+    def layout(self) -> tuple[str, ...]:
+        return ("stiffness", *self.effects)
+
+    @property
+    def structural(self) -> tuple[str, ...]:
+        return tuple(e for e in self.effects if self.kinds[e] == "structural")
+
+    @property
+    def forcing(self) -> tuple[str, ...]:
+        return tuple(e for e in self.effects if self.kinds[e] == "forcing")
+
+    def with_effect(self, name: str) -> SynchronousModel:
+        if name == RUNOUT:
+            return SynchronousModel(self.effects, self.ip, True)
+        return SynchronousModel((*self.effects, name), self.ip, self.runout)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return (*self.effects, *((RUNOUT,) if self.runout else ()))
+
+    # ---------------------------------------------------------- coefficient layout
+    def _slots(self) -> dict[str, slice]:
+        out, j = {}, 0
+        for e in smooth_effects(self.layout):
+            n = len(e.coefficients)
+            out[e.name] = slice(j, j + n)
+            j += n
+        return out
+
+    def coef_vector(self, structural: dict[str, np.ndarray], forcing: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        slots = self._slots()
+        coef = np.zeros(max(s.stop for s in slots.values()))
+        coef[slots["stiffness"]] = 1.0
+        for d in (structural, forcing or {}):
+            for k, v in d.items():
+                coef[slots[k]] = v
+        return coef
+
+    def linearised(self, coef: np.ndarray, speed: float) -> tuple[np.ndarray, np.ndarray]:
+        """``A_q``, ``A_w`` (2x2, coordinates ``(u, v) = (th_y, th_x)``) at dimensionless ``speed``."""
+        accel = compile_accel(self.layout)
+        A_q = np.empty((2, 2))
+        A_w = np.empty((2, 2))
+        for j, (thx, thy) in enumerate(((0.0, 1.0), (1.0, 0.0))):
+            ay, ax = accel(0.0, speed, 0.0, thx, thy, 0.0, 0.0, self.ip, coef)
+            A_q[:, j] = (ay, ax)
+            ay, ax = accel(0.0, speed, 0.0, 0.0, 0.0, thx, thy, self.ip, coef)
+            A_w[:, j] = (ay, ax)
+        # forcing terms enter at phi = 0 too: take them out (the structural part is linear)
+        f = np.array(accel(0.0, speed, 0.0, 0.0, 0.0, 0.0, 0.0, self.ip, coef))
+        return A_q - f[:, None], A_w - f[:, None]
+
+    def forcing_1x(self, coef: np.ndarray, speed: float, accel_rate: float) -> np.ndarray:
+        """Complex 1X amplitude (lead) of the forcing, per coordinate ``(u, v)``."""
+        accel = compile_accel(self.layout)
+        ph = np.linspace(0.0, 2 * math.pi, 16, endpoint=False)
+        f = np.array([accel(p, speed, accel_rate, 0.0, 0.0, 0.0, 0.0, self.ip, coef) for p in ph])
+        return (2.0 / len(ph)) * (f.T @ np.exp(-1j * ph))
+
+
+@dataclass
+class VectorFit:
+    """A fitted synchronous model: parameters, model vectors, residual, criticals."""
+
+    model: SynchronousModel
+    table: VectorTable
+    w_ref: float  #: rad/s
+    structural: dict[str, np.ndarray]
+    forcing: dict[str, np.ndarray]  #: coefficients in the table's amplitude unit
+    runout: np.ndarray | None  #: complex per probe
+    predicted: np.ndarray  #: complex (rows, probes)
+    method: str  #: "quasi-steady" or "transient"
+    jacobian: np.ndarray  #: of the stacked residual w.r.t. the parameters ``param_names``
+    param_names: tuple[str, ...]
+    params: np.ndarray
+    success: bool = True
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self.table.vectors[1] - self.predicted
+
+    @property
+    def rms(self) -> float:
+        """RMS of the complex residual (per probe and row), in the table's amplitude unit."""
+        r = self.residual
+        return float(np.sqrt(np.nanmean(np.abs(r) ** 2)))
+
+    @property
+    def criticals(self) -> list[dict[str, float]]:
+        return critical_speeds(self.model, self.coef(), self.w_ref, self.table.speed)
+
+    def coef(self) -> np.ndarray:
+        return self.model.coef_vector(self.structural, self.forcing)
+
+    def values(self) -> dict[str, dict[str, float]]:
+        """Each effect's physical parameters (forcing amplitudes in the table's unit)."""
+        out: dict[str, dict[str, float]] = {}
+        for name in self.model.effects:
+            c = (self.structural | self.forcing)[name]
+            out[name] = get_effect(name).from_coefficients(np.asarray(c, dtype=float))
+        if self.runout is not None:
+            out[RUNOUT] = {p: float(abs(v)) for p, v in zip(self.table.probes, self.runout, strict=True)}
+        out["natural_frequency"] = {"rpm": self.w_ref / SPEED_UNITS["rpm"]}
+        return out
+
+
+# ----------------------------------------------------------------- predictions
+def _probe_matrix(table: VectorTable) -> np.ndarray:
+    """(probes, 2) weights of (Q_u, Q_v) in each probe's vector."""
+    if table.angles is None:
+        # no geometry: one probe (or several, each seen as the u direction)
+        return np.tile([1.0, 0.0], (len(table.probes), 1))
+    return np.column_stack([np.cos(table.angles), np.sin(table.angles)])
+
+
+def _poly_fit(f, points: np.ndarray, basis) -> np.ndarray | None:
+    """Coefficients of ``f`` (array-valued) in ``basis`` fitted at ``points``, or None when
+    the basis does not reproduce ``f`` exactly (checked at the last two points)."""
+    vals = np.array([f(*p) for p in points])
+    X = np.array([basis(*p) for p in points])
+    coef = np.linalg.lstsq(X[:-2], vals[:-2].reshape(len(points) - 2, -1), rcond=None)[0]
+    check = X[-2:] @ coef
+    if not np.allclose(check, vals[-2:].reshape(2, -1), rtol=1e-9, atol=1e-12 * (1 + np.abs(vals).max())):
+        return None
+    return coef.reshape((X.shape[1], *vals.shape[1:]))
+
+
+#: speed polynomials the linearised model and the forcing are tried in (exact for the
+#: library: the gyroscopic term is linear in the speed, the unbalance quadratic, and
+#: linear in the acceleration); anything else falls back to a row-by-row evaluation
+def _speed_basis(w: float, wd: float) -> np.ndarray:
+    return np.array([1.0, w, w * w, wd])
+_POINTS = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [0.5, 1.0], [1.5, -0.5], [3.0, 0.7], [0.7, 2.0]])
+
+
+def _quasi_steady(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: list[np.ndarray],
+                  W: np.ndarray, Wdot: np.ndarray) -> np.ndarray:
+    """Basis responses (rows, 2, n_basis) of the linearised model at each speed."""
+    basis = _speed_basis
+    lin = _poly_fit(lambda w, wd: np.stack(model.linearised(coef_struct, w)), _POINTS, basis)
+    forc = _poly_fit(lambda w, wd: np.column_stack([model.forcing_1x(c, w, wd) for c in forcing_coefs]),
+                     _POINTS, basis) if forcing_coefs else None
+    X = np.column_stack([basis(w, wd) for w, wd in zip(W, Wdot, strict=True)]).T  # (rows, 4)
+    if lin is not None and forcing_coefs and forc is not None:
+        AA = np.einsum("rb,bkij->rkij", X, lin)
+        F = np.einsum("rb,bcn->rcn", X.astype(complex), forc)
+        M = -(W * W)[:, None, None] * np.eye(2) - AA[:, 0] - 1j * W[:, None, None] * AA[:, 1]
+        return np.linalg.solve(M, F)
+    out = np.empty((len(W), 2, len(forcing_coefs)), dtype=complex)
+    for k, (w, wd) in enumerate(zip(W, Wdot, strict=True)):
+        A_q, A_w = model.linearised(coef_struct, w)
+        M = -w * w * np.eye(2) - A_q - 1j * w * A_w
+        F = np.column_stack([model.forcing_1x(c, w, wd) for c in forcing_coefs])
+        out[k] = np.linalg.solve(M, F)
+    return out
+
+
+def _transient(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: list[np.ndarray],
+               tau: np.ndarray, W: np.ndarray, *, coast_down: bool) -> np.ndarray:
+    """Basis responses (rows, 2, n_basis): the model run along the speed profile, tracked per revolution."""
+    speed = PchipInterpolator(tau, W, extrapolate=True)
+    w_max = float(W.max())
+    lead = LEAD_IN_REVS * 2 * math.pi / max(float(W[0]), 1e-3)
+    # RK4 and the trapezoid in phi: 48 steps a turn keep both below 1e-4 of the peak
+    h = min(0.05, 2 * math.pi / (48.0 * w_max))
+    t0, t1 = float(tau[0]) - lead, float(tau[-1]) + 2 * math.pi / max(float(W[-1]), 1e-3)
+    grid = np.arange(t0, t1 + h, h)
+    Wg = np.where(grid < tau[0], W[0], np.where(grid > tau[-1], W[-1], speed(np.clip(grid, tau[0], tau[-1]))))
+    Wg = np.maximum(Wg, 1e-9)
+    phi = np.concatenate(([0.0], np.cumsum(0.5 * (Wg[1:] + Wg[:-1]) * np.diff(grid))))
+    # a row is one revolution whose mid-time is t and whose speed is 2 pi / its duration
+    # (what per-revolution trackers report): it starts at t - pi / W, not at phi(t) - pi
+    phi_rows = np.interp(tau - math.pi / W, grid, phi) + math.pi
+    accel = compile_accel(model.layout)
+    out = np.empty((len(tau), 2, len(forcing_coefs)), dtype=complex)
+    sims = np.empty((len(grid), 2 * len(forcing_coefs)))
+    buf = np.empty((len(grid), 10))
+    for j, c in enumerate(forcing_coefs):
+        # start on the steady-state response at the first speed: no artificial transient
+        Q0 = _quasi_steady(model, coef_struct, [c], np.array([Wg[0]]), np.array([0.0]))[0, :, 0]
+        e = np.exp(1j * phi[0])
+        state = np.array([np.real(Q0[1] * e), np.real(Q0[0] * e),
+                          np.real(1j * Wg[0] * Q0[1] * e), np.real(1j * Wg[0] * Q0[0] * e)])
+        buf[0, 4], buf[0, 5] = state[0], state[1]
+        done = integrate_profile(accel, state, grid, phi, Wg, model.ip, coef_struct + c, 0.0, 1, buf)
+        if done < len(grid):
+            raise FloatingPointError("the synchronous model diverged (unstable parameters)")
+        sims[:, 2 * j] = buf[:, 5]  # u = th_y
+        sims[:, 2 * j + 1] = buf[:, 4]  # v = th_x
+    track = order_track(grid, sims, phi, (1,), at=phi_rows)
+    if len(track.t) != len(tau):  # pragma: no cover - the grid covers every row by construction
+        raise RuntimeError("order tracking lost rows")
+    vec = track.vectors[1]
+    for j in range(len(forcing_coefs)):
+        out[:, 0, j] = vec[:, 2 * j]
+        out[:, 1, j] = vec[:, 2 * j + 1]
+    del coast_down
+    return out
+
+
+class _Problem:
+    """The variable-projection least-squares problem of one model on one table."""
+
+    def __init__(self, model: SynchronousModel, table: VectorTable, method: str) -> None:
+        self.model, self.table = model, table
+        self.Y = table.vectors[1]
+        self.valid = np.isfinite(self.Y)
+        self.P = _probe_matrix(table)
+        self.method = method
+        scale = np.nanmax(np.abs(self.Y))
+        self.scale = float(scale) if scale > 0 else 1.0
+        slots = model._slots()
+        self.basis: list[tuple[str, int]] = []
+        for e in model.forcing:
+            for q in range(slots[e].stop - slots[e].start):
+                self.basis.append((e, q))
+        self.struct_sizes = [(e, slots[e].stop - slots[e].start) for e in model.structural]
+        W_abs = table.speed
+        self.coast_down = bool(W_abs[-1] < W_abs[0])
+        if table.t is not None:
+            self.Wdot_abs = np.gradient(W_abs, table.t)
+        else:
+            self.Wdot_abs = np.zeros_like(W_abs)
+
+    # parameters: [log w_ref, structural coefficients...]
+    def unpack(self, x: np.ndarray) -> tuple[float, dict[str, np.ndarray]]:
+        w_ref = math.exp(x[0])
+        st, j = {}, 1
+        for e, n in self.struct_sizes:
+            st[e] = np.asarray(x[j : j + n])
+            j += n
+        return w_ref, st
+
+    def basis_vectors(self, x: np.ndarray, method: str | None = None) -> np.ndarray:
+        """(rows, probes, n_lin) complex basis of the linear parameters."""
+        w_ref, st = self.unpack(x)
+        coef = self.model.coef_vector(st)
+        fc = []
+        for e, q in self.basis:
+            c = np.zeros_like(coef)
+            c[self.model._slots()[e].start + q] = 1.0
+            fc.append(c)
+        W = self.table.speed / w_ref
+        method = method or self.method
+        if not fc:
+            B = np.empty((len(W), 2, 0), dtype=complex)
+        elif method == "transient":
+            B = _transient(self.model, coef, fc, self.table.t * w_ref, W, coast_down=self.coast_down)
+        else:
+            B = _quasi_steady(self.model, coef, fc, W, self.Wdot_abs / w_ref**2)
+        probes = np.einsum("pc,rcn->rpn", self.P, B)
+        if self.model.runout:
+            n_p = len(self.table.probes)
+            R = np.zeros((len(W), n_p, n_p), dtype=complex)
+            for p in range(n_p):
+                R[:, p, p] = 1.0
+            probes = np.concatenate([probes, R], axis=2)
+        return probes
+
+    def solve_linear(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Real forcing coefficients and complex runouts: least squares on the valid entries."""
+        n_f = len(self.basis)
+        n_p = B.shape[2] - n_f
+        v = self.valid
+        # real unknowns: n_f forcing coefficients, then (Re, Im) of each runout
+        cols = [B[..., j][v] for j in range(n_f)]
+        for j in range(n_p):
+            cols += [B[..., n_f + j][v], 1j * B[..., n_f + j][v]]
+        A = np.column_stack(cols) if cols else np.empty((int(v.sum()), 0), dtype=complex)
+        y = self.Y[v]
+        Ar = np.vstack([A.real, A.imag])
+        yr = np.concatenate([y.real, y.imag])
+        sol = np.linalg.lstsq(Ar, yr, rcond=None)[0] if Ar.shape[1] else np.empty(0)
+        return sol, (A @ sol if Ar.shape[1] else np.zeros_like(y))
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        try:
+            B = self.basis_vectors(x)
+        except (FloatingPointError, np.linalg.LinAlgError):
+            return np.full(2 * int(self.valid.sum()), 1e3)
+        _, pred = self.solve_linear(B)
+        r = (self.Y[self.valid] - pred) / self.scale
+        return np.concatenate([r.real, r.imag])
+
+
+def _initial_guesses(table: VectorTable, ip: float) -> list[tuple[float, float]]:
+    """(w_ref, c) starts from the amplitude peak and its half-power width."""
+    Y = table.vectors[1]
+    amp = np.nanmax(np.abs(Y - Y[:1]), axis=1)
+    k = int(np.nanargmax(amp))
+    w_peak = float(table.speed[k])
+    half = amp >= amp[k] / math.sqrt(2.0)
+    lo = k
+    while lo > 0 and half[lo - 1]:
+        lo -= 1
+    hi = k
+    while hi < len(amp) - 1 and half[hi + 1]:
+        hi += 1
+    zeta = float(np.clip((table.speed[hi] - table.speed[lo]) / (2.0 * w_peak), 0.005, 0.3))
+    w0 = w_peak * math.sqrt(1.0 - ip)
+    return [(w0 * f, 2.0 * zeta * g) for f in (1.0, 0.96, 1.04) for g in (1.0, 0.4, 2.5)]
+
+
+def fit_vectors(
+    table: VectorTable,
+    model: SynchronousModel,
+    *,
+    method: str = "auto",
+    start: VectorFit | None = None,
+    extra_starts: Sequence[np.ndarray] = (),
+) -> VectorFit:
+    """Least-squares fit of ``model`` to the 1X vectors of ``table``.
+
+    ``method``: ``"quasi-steady"``, ``"transient"`` (needs a time column) or ``"auto"``
+    (see the module docstring).  ``start``: a previous fit whose parameters seed this one
+    (the diagnosis adds one effect at a time).
+    """
+    if method not in ("auto", "quasi-steady", "transient"):
+        raise ValueError(f"method must be 'auto', 'quasi-steady' or 'transient', got {method!r}")
+    if method == "transient" and table.t is None:
+        raise ValueError("the transient model needs a time column in the table")
+    chosen = method
+    if method == "auto":
+        chosen = start.method if start is not None else ("transient" if table.t is not None else "quasi-steady")
+    prob = _Problem(model, table, chosen)
+    n_struct = sum(n for _, n in prob.struct_sizes)
+    starts: list[np.ndarray] = []
+    if start is not None:
+        x = [math.log(start.w_ref)]
+        for e, n in prob.struct_sizes:
+            x += list(start.structural.get(e, np.full(n, _nonzero_start(e))))
+        starts.append(np.array(x))
+    starts += [np.asarray(s, dtype=float) for s in extra_starts]
+    if start is None:
+        for w0, c0 in _initial_guesses(table, model.ip):
+            x = [math.log(w0)]
+            for e, n in prob.struct_sizes:
+                x += [c0] if e == "viscous_damping" else [_nonzero_start(e)] * n
+            starts.append(np.array(x))
+    lower = np.full(1 + n_struct, -np.inf)
+    upper = np.full(1 + n_struct, np.inf)
+    j = 1
+    for e, n in prob.struct_sizes:
+        eff = get_effect(e)
+        for q in range(n):
+            p = eff.parameters[min(q, len(eff.parameters) - 1)]
+            # the simulator's domain (damping >= 0, anisotropy < 1); the plausibility bounds are checked later
+            lower[j + q] = 0.0 if e == "viscous_damping" else -0.95
+            upper[j + q] = 2.0 if e == "viscous_damping" else 0.95
+            del p
+        j += n
+    def solve(problem: _Problem, xs: list[np.ndarray]):
+        best = None
+        for x0 in xs:
+            x0 = np.clip(x0, lower + 1e-9, upper - 1e-9)
+            res = least_squares(problem.residual, x0, bounds=(lower, upper), x_scale="jac", method="trf",
+                                diff_step=1e-6, max_nfev=200)
+            if best is None or res.cost < best.cost:
+                best = res
+        return best
+
+    if chosen == "transient" and start is None:
+        # the many starts on the cheap quasi-steady model; the transient refines the best
+        # (its peak is delayed: the quasi-steady w_ref is off by a few per cent either way)
+        best_q = solve(_Problem(model, table, "quasi-steady"), starts)
+        starts = [best_q.x + np.r_[d, np.zeros(n_struct)] for d in (0.0, -0.03, 0.03)]
+    best = solve(prob, starts)
+    if method == "auto" and table.t is not None and chosen == "transient" and start is None:
+        # keep the quasi-steady model only where it is as good as the transient one
+        Bt = prob.basis_vectors(best.x, "transient")
+        Bq = prob.basis_vectors(best.x, "quasi-steady")
+        sol, _ = prob.solve_linear(Bt)
+        pt, pq = _predict(prob, Bt, sol), _predict(prob, Bq, sol)
+        if np.nanmax(np.abs(pt - pq)) <= QUASI_STEADY_TOL * np.nanmax(np.abs(pt)):
+            prob.method = "quasi-steady"
+    return _finish(prob, best.x, best.success)
+
+
+def _nonzero_start(effect: str) -> float:
+    return 1e-3 if effect != "viscous_damping" else 0.05
+
+
+def _predict(prob: _Problem, B: np.ndarray, sol: np.ndarray) -> np.ndarray:
+    n_f = len(prob.basis)
+    pred = np.einsum("rpn,n->rp", B[..., :n_f], sol[:n_f]) if n_f else np.zeros(B.shape[:2], dtype=complex)
+    for j in range(B.shape[2] - n_f):
+        pred = pred + B[..., n_f + j] * (sol[n_f + 2 * j] + 1j * sol[n_f + 2 * j + 1])
+    return pred
+
+
+def _finish(prob: _Problem, x: np.ndarray, success: bool) -> VectorFit:
+    B = prob.basis_vectors(x)
+    sol, _ = prob.solve_linear(B)
+    pred = _predict(prob, B, sol)
+    w_ref, st = prob.unpack(x)
+    n_f = len(prob.basis)
+    forcing: dict[str, np.ndarray] = {}
+    for (e, q), v in zip(prob.basis, sol[:n_f], strict=True):
+        forcing.setdefault(e, np.zeros(len(get_effect(e).coefficients)))[q] = v
+    runout = None
+    if prob.model.runout:
+        runout = sol[n_f::2] + 1j * sol[n_f + 1 :: 2]
+    # Jacobian of the whole residual w.r.t. all parameters (nonlinear and linear), for the HAC tests
+    names = ["log_w_ref"] + [f"{e}[{q}]" for e, n in prob.struct_sizes for q in range(n)]
+    names += [f"{e}[{q}]" for e, q in prob.basis]
+    if runout is not None:
+        names += [f"{RUNOUT}[{p}].{c}" for p in prob.table.probes for c in ("re", "im")]
+    theta = np.concatenate([x, sol])
+
+    def full(th: np.ndarray) -> np.ndarray:
+        Bx = prob.basis_vectors(th[: len(x)])
+        r = (prob.Y[prob.valid] - _predict(prob, Bx, th[len(x):])[prob.valid])
+        return np.concatenate([r.real, r.imag])
+
+    r0 = full(theta)
+    J = np.empty((len(r0), len(theta)))
+    for i in range(len(theta)):
+        step = 1e-6 * max(1.0, abs(theta[i]))
+        tp = theta.copy()
+        tp[i] += step
+        J[:, i] = (full(tp) - r0) / step
+    return VectorFit(prob.model, prob.table, w_ref, st, forcing, runout, pred, prob.method, -J, tuple(names),
+                     theta, bool(success))
+
+
+# ----------------------------------------------------------------- criticals
+def _modes(model: SynchronousModel, coef: np.ndarray, W: float) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues with positive imaginary part and each one's forward share."""
+    A_q, A_w = model.linearised(coef, W)
+    A = np.block([[np.zeros((2, 2)), np.eye(2)], [A_q, A_w]])
+    lam, vec = np.linalg.eig(A)
+    keep = lam.imag > 1e-9
+    lam, vec = lam[keep], vec[:, keep]
+    fwd = np.abs(vec[0] + 1j * vec[1])
+    bwd = np.abs(vec[0] - 1j * vec[1])
+    order = np.argsort(lam.imag)
+    return lam[order], (fwd / np.maximum(fwd + bwd, 1e-300))[order]
+
+
+def critical_speeds(model: SynchronousModel, coef: np.ndarray, w_ref: float, speed: np.ndarray,
+                    min_forward_share: float = 0.1) -> list[dict[str, float]]:
+    """Critical speeds (rpm) within the run's speed range and their damping ratios, lowest first."""
+    W = np.asarray(speed, dtype=float) / w_ref
+    lo, hi = float(W.min()), float(W.max())
+    grid = np.linspace(0.5 * lo, hi, 400)
+    out = []
+    n_branch = None
+    vals = []
+    for w in grid:
+        lam, _ = _modes(model, coef, w)
+        if n_branch is None:
+            n_branch = len(lam)
+        vals.append(lam.imag if len(lam) == n_branch else np.full(n_branch, np.nan))
+    vals = np.array(vals) - grid[:, None]
+    for b in range(n_branch or 0):
+        f = vals[:, b]
+        for k in np.nonzero(np.sign(f[:-1]) * np.sign(f[1:]) < 0)[0]:
+            def g(w, b=b):
+                lam, _ = _modes(model, coef, w)
+                return lam.imag[b] - w
+            try:
+                wc = brentq(g, grid[k], grid[k + 1], xtol=1e-12)
+            except ValueError:
+                continue
+            lam, share = _modes(model, coef, wc)
+            if share[b] < min_forward_share or not (lo * 0.999 <= wc <= hi * 1.001):
+                continue
+            out.append({"rpm": wc * w_ref / SPEED_UNITS["rpm"],
+                        "damping_ratio": float(-lam[b].real / abs(lam[b])),
+                        "forward_share": float(share[b])})
+    out = sorted(out, key=lambda d: d["rpm"])
+    # a degenerate (isotropic) pair of branches crosses the 1x line once
+    merged: list[dict[str, float]] = []
+    for c in out:
+        if merged and abs(c["rpm"] - merged[-1]["rpm"]) <= 1e-6 * c["rpm"]:
+            merged[-1]["forward_share"] = max(merged[-1]["forward_share"], c["forward_share"])
+            continue
+        merged.append(c)
+    return merged
+
+
+def known_effects() -> tuple[str, ...]:
+    """The library effects the synchronous model can carry (for error messages)."""
+    ok = []
+    for name in EFFECTS:
+        try:
+            if name != "stiffness":
+                _classify(name)
+                ok.append(name)
+        except ValueError:
+            pass
+    return tuple(ok)
