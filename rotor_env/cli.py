@@ -416,6 +416,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_simulate_parser(sub)
     _add_paper_parser(sub)
     _add_diagnose_parsers(sub)
+    from .monitor.cli import add_monitor_parser
+
+    add_monitor_parser(sub)
     _add_plugin_parsers(sub)
     return parser
 

@@ -1,0 +1,73 @@
+"""The live view of ``rotor-id monitor`` in a terminal (rich): flags, coefficients, CUSUMs, alarms."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class LiveView:
+    """A rich ``Live`` table refreshed at every status line; alarms are kept below it."""
+
+    def __init__(self, source: str) -> None:
+        from rich.console import Console
+
+        self.source = source
+        self.console = Console(stderr=False)
+        self.live = None
+        self.monitor = None
+        self.alarms: list[dict] = []
+        self.last_status: dict | None = None
+
+    def start(self, monitor) -> None:
+        from rich.live import Live
+
+        self.monitor = monitor
+        self.live = Live(self._render(), console=self.console, refresh_per_second=4, transient=False)
+        self.live.start()
+
+    def show(self, event: dict) -> None:
+        if event["event"] in ("appeared", "changed", "disappeared"):
+            self.alarms.append(event)
+        elif event["event"] == "status":
+            self.last_status = event
+        elif event["event"] == "error":
+            self.console.print(f"[red]error:[/red] {event['message']}")
+        if self.live is not None:
+            self.live.update(self._render())
+
+    def _render(self) -> Any:
+        from rich.console import Group
+        from rich.table import Table
+
+        st = self.last_status
+        title = f"rotor-id monitor — {self.source}"
+        if st is not None:
+            title += f"   t = {st['t']:.2f}, speed {st['speed']:.3f}, noise floor {st['noise_floor']:.3g}"
+        table = Table(title=title)
+        for col in ("effect", "coefficients", "significant", "CUSUM"):
+            table.add_column(col)
+        mon = self.monitor
+        if st is not None and mon is not None:
+            for name in mon.effects:
+                coef = ", ".join(f"{k} = {v:.4g}" for k, v in st["coefficients"][name].items())
+                flag = "[green]yes[/green]" if st["significant"][name] else "no"
+                table.add_row(name, coef, flag, f"{st['cusum'][name]:.2f} / {mon.threshold:.2f}")
+        parts: list[Any] = [table]
+        if self.alarms:
+            a = self.alarms[-1]
+            parts.append(f"[bold red]latest alarm[/bold red]: {a['effect']} {a['event']} at t = {a['t_alarm']:.2f} "
+                         f"(onset {a['t_onset']:.2f}): {a['value_before']} -> {a['value_after']}; "
+                         f"{len(self.alarms)} alarm(s) so far")
+        else:
+            parts.append("no alarm")
+        return Group(*parts)
+
+    def stop(self) -> None:
+        if self.live is not None:
+            self.live.stop()
+            self.live = None
+
+    def print_summary(self, summary: dict) -> None:
+        self.console.print(f"{summary['samples']} samples to t = {summary['t']:.2f}: {summary['alarms']} alarm(s)")
+        for e in summary["events"]:
+            self.console.print(f"  {e['effect']} {e['event']} at t = {e['t_alarm']:.2f} (onset {e['t_onset']:.2f})")

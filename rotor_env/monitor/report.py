@@ -1,0 +1,36 @@
+"""A self-contained HTML page of a monitoring run: the alarms, the final model, the design."""
+
+from __future__ import annotations
+
+import html
+import json
+
+from ..outputs import atomic_write_text
+
+
+def write_report(monitor, path, *, source: str, overwrite: bool = False) -> None:
+    """Write the run's events and final state to ``path`` (every value escaped)."""
+    s = monitor.summary()
+    esc = html.escape
+    rows = "".join(
+        f"<tr><td>{esc(e['event'])}</td><td>{esc(e['effect'])}</td><td>{e['t_onset']:.2f}</td>"
+        f"<td>{e['t_alarm']:.2f}</td><td>{esc(json.dumps(e['value_before']))}</td>"
+        f"<td>{esc(json.dumps(e['value_after']))}</td><td>{e['evidence']['log10_p']:.1f}</td></tr>"
+        for e in monitor.events)
+    model = "".join(
+        f"<tr><td>{esc(name)}</td><td>{esc(json.dumps(coef))}</td><td>{'yes' if s['significant'][name] else 'no'}"
+        f"</td><td>{s['counted_blocks'][name]}</td></tr>" for name, coef in s["coefficients"].items())
+    cfg = monitor.config
+    text = f"""<!doctype html><html><head><meta charset="utf-8"><title>rotor-id monitor</title>
+<style>body{{font-family:sans-serif;max-width:60em;margin:2em auto}}td,th{{border-bottom:1px solid #ccc;
+padding:.2em .6em}}table{{border-collapse:collapse}}</style></head><body>
+<h1>On-line monitoring of {esc(source)}</h1>
+<p>{s['samples']} samples to t = {s['t']:.2f} (speed {s['speed']:.3f}); equation-error noise floor
+{s['noise_floor']:.3g}. CUSUM per effect, threshold {s['threshold']:.3f} for a target in-control ARL of
+{cfg.arl0:g} samples (blocks of {cfg.block}); {s['alarms']} alarm(s).</p>
+<h2>Alarms</h2><table><tr><th>event</th><th>effect</th><th>onset</th><th>alarm</th><th>before</th>
+<th>after</th><th>log10 p</th></tr>{rows}</table>
+<h2>Model at the end</h2><table><tr><th>effect</th><th>parameters</th><th>significant</th>
+<th>blocks counted</th></tr>{model}</table></body></html>
+"""
+    atomic_write_text(path, text, overwrite=overwrite)

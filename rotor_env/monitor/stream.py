@@ -1,0 +1,364 @@
+"""Measurement streams read in chunks: a file, a file being appended (``--follow``), stdin.
+
+The formats are :func:`rotor_env.io.load_measurements`' (CSV with a header line, or
+Parquet; required ``t, phi, theta_x, theta_y``, rates and accelerations optional) and so
+are the errors: they name the source, the (1-based) line and the column.  Nothing is
+loaded whole: CSV text is read in blocks of bytes, only complete lines are parsed
+(pyarrow's CSV parser on the block; on a parse error the block is read again line by
+line to name the bad one), Parquet row batch by row batch.
+
+Missing rates and accelerations are estimated as ``load_measurements`` does
+(Savitzky-Golay, :func:`rotor_env.io.derive_rates`), on a sliding buffer: a sample's
+derivative needs half a window of samples after it, so those are held back until they
+arrive (or the stream ends).  An encoder's ``phi`` wrapped to one turn is unwrapped.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from ..io import DERIVABLE, MAX_TILT, REQUIRED, UNIFORM_RTOL, MeasurementError
+from ..measurements import COLUMNS
+
+__all__ = ["StreamReader", "iter_chunks"]
+
+_CHUNK_BYTES = 1 << 20
+
+
+class StreamReader:
+    """Chunks of ``(m, 10)`` samples from a CSV/Parquet file, a followed file, or stdin.
+
+    ``source``: a path, ``"-"`` (standard input) or a binary file object.  ``follow``:
+    at the end of the data wait for more (``poll`` seconds between looks) until
+    ``idle_exit`` seconds pass without any (``None``: forever).  ``line`` is the file
+    line of the last row handed out.
+    """
+
+    def __init__(self, source, *, follow: bool = False, poll: float = 0.2, idle_exit: float | None = None,
+                 chunk_bytes: int = _CHUNK_BYTES) -> None:
+        self.follow = follow
+        self.poll = poll
+        self.idle_exit = idle_exit
+        self.chunk_bytes = int(chunk_bytes)
+        if isinstance(source, (str, Path)) and str(source) == "-":
+            self.name = "<stdin>"
+            self._fh: BinaryIO | None = sys.stdin.buffer
+            self._path = None
+        elif isinstance(source, (str, Path)):
+            self._path = Path(source)
+            self.name = str(source)
+            if not self._path.exists():
+                raise MeasurementError(f"{self._path}: no such file")
+            if self._path.is_dir():
+                raise MeasurementError(f"{self._path}: is a directory, not a measurement file")
+            self._fh = None
+        else:
+            self.name = getattr(source, "name", "<stream>")
+            self._fh = source
+            self._path = None
+        self.line = 1
+        self._last_t = math.nan
+        self._dt = 0.0
+        self._phi_offset = 0.0
+        self._phi_last = math.nan
+        self._phi_min = math.inf
+        self._phi_max = -math.inf
+        self._deriv: _Derivatives | None = None
+
+    # ------------------------------------------------------------------ chunks
+    def __iter__(self) -> Iterator[np.ndarray]:
+        if self._path is not None and self._path.suffix == ".parquet":
+            yield from self._parquet()
+            return
+        fh = self._fh if self._fh is not None else open(self._path, "rb")
+        try:
+            yield from self._csv(fh)
+        finally:
+            if self._fh is None:
+                fh.close()
+
+    def _read(self, fh: BinaryIO) -> bytes:
+        read1 = getattr(fh, "read1", None)
+        return read1(self.chunk_bytes) if read1 is not None else fh.read(self.chunk_bytes)
+
+    def _more(self, fh: BinaryIO) -> Iterator[bytes]:
+        """Blocks of bytes; with ``follow``, waits at the end for the file to grow."""
+        idle_since = time.monotonic()
+        while True:
+            data = self._read(fh)
+            if data:
+                idle_since = time.monotonic()
+                yield data
+                continue
+            if not self.follow or (self.idle_exit is not None and time.monotonic() - idle_since > self.idle_exit):
+                return
+            time.sleep(self.poll)
+
+    def _csv(self, fh: BinaryIO) -> Iterator[np.ndarray]:
+        rest = b""
+        header: list[str] | None = None
+        for data in self._more(fh):
+            rest += data
+            cut = rest.rfind(b"\n")
+            if cut < 0:
+                continue
+            block, rest = rest[: cut + 1], rest[cut + 1 :]
+            if header is None:
+                first = block.index(b"\n")
+                header = self._header(block[:first])
+                block = block[first + 1 :]
+                self.line = 1
+            if block:
+                yield from self._parsed(block, header)
+        if rest.strip():
+            if header is None:
+                header = self._header(rest)
+            else:
+                yield from self._parsed(rest + b"\n", header)
+        if header is None:
+            raise MeasurementError(f"{self.name}: the stream is empty (expected a header line)")
+        yield from self._emit(None)
+
+    def _parsed(self, block: bytes, header: list[str]) -> Iterator[np.ndarray]:
+        """Validated chunks of a block of lines; at a bad line, the rows before it first, then the error."""
+        self._partial = None
+        try:
+            parsed = self._parse(block, header)
+        except MeasurementError:
+            if self._partial is not None and self._partial[0].shape[0]:
+                yield from self._emit(self._partial)
+            raise
+        yield from self._emit(parsed)
+
+    def _header(self, raw: bytes) -> list[str]:
+        text = raw.decode("utf-8-sig", errors="replace").strip()
+        header = [h.strip() for h in next(csv.reader([text]))] if text else []
+        dup = {h for h in header if header.count(h) > 1}
+        if dup:
+            raise MeasurementError(f"{self.name}: column(s) {sorted(dup)} appear more than once")
+        missing = [c for c in REQUIRED if c not in header]
+        if missing:
+            raise MeasurementError(f"{self.name}: missing required column(s) {missing}; the header has {header}; "
+                                   f"required: {list(REQUIRED)}, optional: {list(DERIVABLE)}")
+        self._header_names = header
+        return header
+
+    def _parse(self, block: bytes, header: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """``(data in file columns, file line of each row)`` of complete lines; errors name the line."""
+        import pyarrow as pa
+        from pyarrow import csv as pacsv
+
+        first_line = self.line + 1
+        n_lines = block.count(b"\n")
+        try:
+            table = pacsv.read_csv(
+                pa.BufferReader(block),
+                read_options=pacsv.ReadOptions(column_names=header, use_threads=False),
+                parse_options=pacsv.ParseOptions(newlines_in_values=False),
+                convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(header, pa.float64())),
+            )
+            data = np.column_stack([table.column(i).to_numpy(zero_copy_only=False) for i in range(len(header))])
+            if data.shape[0] == n_lines:
+                lines = np.arange(first_line, first_line + n_lines, dtype=np.int64)
+            else:  # blank lines were skipped: number the rows from the text
+                lines = np.array([first_line + i for i, ln in enumerate(block.split(b"\n")[:-1]) if ln.strip()],
+                                 dtype=np.int64)
+        except (pa.ArrowInvalid, ValueError):
+            data, lines = self._parse_slowly(block, header, first_line)
+        self.line += n_lines
+        return np.asarray(data, dtype=float).reshape(-1, len(header)), lines
+
+    def _parse_slowly(self, block: bytes, header: list[str], first_line: int):
+        rows, lines = [], []
+        text = block.decode("utf-8", errors="replace").split("\n")[:-1]
+        for i, raw in enumerate(text):
+            line_no = first_line + i
+            if not raw.strip():
+                continue
+            cells = next(csv.reader([raw]))
+            if len(cells) != len(header):
+                self._partial = (np.array(rows, dtype=float).reshape(-1, len(header)), np.array(lines, dtype=np.int64))
+                raise MeasurementError(f"{self.name}, line {line_no}: {len(cells)} fields, but the header has "
+                                       f"{len(header)}")
+            vals = []
+            for name, cell in zip(header, cells, strict=True):
+                try:
+                    vals.append(float(cell))
+                except ValueError:
+                    self._partial = (np.array(rows, dtype=float).reshape(-1, len(header)),
+                                     np.array(lines, dtype=np.int64))
+                    raise MeasurementError(f"{self.name}, line {line_no}, column {name!r}: {cell.strip()!r} is "
+                                           "not a number") from None
+            rows.append(vals)
+            lines.append(line_no)
+        return np.array(rows, dtype=float).reshape(-1, len(header)), np.array(lines, dtype=np.int64)
+
+    def _parquet(self) -> Iterator[np.ndarray]:
+        import pyarrow.parquet as pq
+
+        try:
+            pf = pq.ParquetFile(self._path)
+        except Exception as exc:
+            raise MeasurementError(f"{self._path}: not a readable Parquet file ({exc})") from None
+        header = self._header(",".join(pf.schema_arrow.names).encode())
+        row = 2
+        for batch in pf.iter_batches(batch_size=65536):
+            try:
+                data = np.column_stack([np.asarray(batch.column(i).to_numpy(zero_copy_only=False), dtype=float)
+                                        for i in range(batch.num_columns)])
+            except (TypeError, ValueError):
+                raise MeasurementError(f"{self._path}: a column is not numeric") from None
+            lines = np.arange(row, row + data.shape[0], dtype=np.int64)
+            row += data.shape[0]
+            yield from self._emit((data, lines))
+        del header
+        yield from self._emit(None)
+
+    # ------------------------------------------------------------------ validation
+    def _emit(self, parsed) -> Iterator[np.ndarray]:
+        """Validate rows (file columns) and hand them out as the ten model columns."""
+        if parsed is None:  # end of stream: the held-back derivatives
+            if self._deriv is not None:
+                out = self._deriv.finish()
+                if out.shape[0]:
+                    yield out
+            return
+        data, lines = parsed
+        out = self._validate(data, lines)
+        if out is None:
+            return
+        if self._deriv is not None:
+            out = self._deriv.push(out)
+        if out.shape[0]:
+            self.line = int(lines[-1])
+            yield out
+
+    def _validate(self, data: np.ndarray, lines: np.ndarray) -> np.ndarray | None:
+        header = self._header_names
+        if data.shape[0] == 0:
+            return None
+        idx = {h: i for i, h in enumerate(header)}
+        for c in COLUMNS:
+            if c in idx:
+                col = data[:, idx[c]]
+                bad = ~np.isfinite(col)
+                if bad.any():
+                    r = int(np.argmax(bad))
+                    raise MeasurementError(f"{self.name}, line {lines[r]}, column {c!r}: value {float(col[r])!r} is not "
+                                           "finite")
+        t = data[:, idx["t"]]
+        tt = t if math.isnan(self._last_t) else np.concatenate([[self._last_t], t])
+        step = np.diff(tt)
+        shift = 0 if math.isnan(self._last_t) else 1
+        if step.size:
+            if (step <= 0).any():
+                r = int(np.argmax(step <= 0))
+                raise MeasurementError(f"{self.name}, line {lines[r + 1 - shift]}, column 't': time {float(tt[r + 1])!r} "
+                                       f"does not increase (previous {float(tt[r])!r})")
+            if self._dt == 0.0:
+                self._dt = float(step[0])
+            off = np.abs(step - self._dt) > UNIFORM_RTOL * self._dt
+            if off.any():
+                r = int(np.argmax(off))
+                raise MeasurementError(f"{self.name}, line {lines[r + 1 - shift]}, column 't': non-uniform "
+                                       f"sampling: step {float(step[r])!r} where the stream's step is {self._dt!r}")
+        for c in ("theta_x", "theta_y"):
+            col = data[:, idx[c]]
+            big = np.abs(col) > MAX_TILT
+            if big.any():
+                r = int(np.argmax(big))
+                raise MeasurementError(f"{self.name}, line {lines[r]}, column {c!r}: value {float(col[r])!r} is beyond "
+                                       f"{MAX_TILT:g} rad, not a shaft's tilt: degrees? (inclinations are in radians)")
+        out = np.zeros((data.shape[0], len(COLUMNS)))
+        for j, c in enumerate(COLUMNS):
+            if c in idx:
+                out[:, j] = data[:, idx[c]]
+        out[:, 1] = self._unwrap(out[:, 1], lines)
+        self._last_t = float(t[-1])
+        if self._deriv is None and any(c not in idx for c in DERIVABLE):
+            self._deriv = _Derivatives([c for c in DERIVABLE if c not in idx], self._dt)
+        return out
+
+    def _unwrap(self, phi: np.ndarray, lines: np.ndarray) -> np.ndarray:
+        """An encoder's angle wrapped to one turn, unwrapped across chunks; degrees refused."""
+        raw = phi if math.isnan(self._phi_last) else np.concatenate([[self._phi_last], phi])
+        jumps = np.abs(np.diff(raw)) > math.pi
+        self._phi_min = min(self._phi_min, float(phi.min()))
+        self._phi_max = max(self._phi_max, float(phi.max()))
+        out = phi + self._phi_offset
+        if jumps.any():
+            shift = 0 if math.isnan(self._phi_last) else 1
+            r = int(np.argmax(jumps))
+            if self._phi_max - self._phi_min > 2 * math.pi + 1e-6:
+                unit = " (wrapped to 360: degrees; convert to radians)" if self._phi_max - self._phi_min <= 360.0 + 1e-6 \
+                    else " (more than half a turn between samples: aliased or not in radians)"
+                raise MeasurementError(f"{self.name}, line {lines[r + 1 - shift]}, column 'phi': jumps from "
+                                       f"{float(raw[r])!r} to {float(raw[r + 1])!r}{unit}")
+            steps = np.diff(raw)
+            wraps = np.where(np.abs(steps) > math.pi, -2 * math.pi * np.round(steps / (2 * math.pi)), 0.0)
+            out = phi + self._phi_offset + np.cumsum(wraps)[len(wraps) - len(phi):]
+            self._phi_offset += float(wraps.sum())
+        self._phi_last = float(phi[-1])
+        return out
+
+
+class _Derivatives:
+    """Savitzky-Golay rates and accelerations on a sliding buffer (as :func:`rotor_env.io.derive_rates`)."""
+
+    def __init__(self, names: list[str], dt: float) -> None:
+        self.targets = [(COLUMNS.index(c), COLUMNS.index(DERIVABLE[c][0]), DERIVABLE[c][1]) for c in names]
+        n = max(7, round(0.2 / dt))
+        self.window = n + 1 - n % 2
+        self.half = self.window // 2
+        self.dt = dt
+        self.buf = np.zeros((0, len(COLUMNS)))
+        self.started = False
+
+    def _filter(self, buf: np.ndarray) -> np.ndarray:
+        out = buf.copy()
+        poly = min(5, self.window - 1)
+        for dst, src, order in self.targets:
+            out[:, dst] = savgol_filter(buf[:, src], self.window, poly, deriv=order, delta=self.dt, mode="interp")
+        return out
+
+    def push(self, rows: np.ndarray) -> np.ndarray:
+        buf = np.concatenate([self.buf, rows])
+        if buf.shape[0] < 2 * self.window:
+            self.buf = buf
+            return np.zeros((0, len(COLUMNS)))
+        full = self._filter(buf)
+        # hand out the samples whose whole window is in the buffer (the first ones too,
+        # at the start: fitted on the first window like the batch filter)
+        lo = 0 if not self.started else self.half + 1
+        hi = buf.shape[0] - self.half
+        self.started = True
+        # keep a whole window before the first sample not handed out (its own window's
+        # start, and the end fit's window if the stream ends here)
+        self.buf = buf[hi - self.half - 1 :]
+        return full[lo:hi]
+
+    def finish(self) -> np.ndarray:
+        buf = self.buf
+        if buf.shape[0] == 0:
+            return buf
+        if buf.shape[0] < self.window:
+            raise MeasurementError(f"too few samples ({buf.shape[0]}) to estimate the rates (a window of "
+                                   f"{self.window})")
+        full = self._filter(buf)
+        self.buf = np.zeros((0, len(COLUMNS)))
+        return full[(self.half + 1 if self.started else 0):]
+
+
+def iter_chunks(source, **kwargs) -> Iterator[np.ndarray]:
+    """Shorthand: ``iter(StreamReader(source, **kwargs))``."""
+    return iter(StreamReader(source, **kwargs))
+
