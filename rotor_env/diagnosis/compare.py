@@ -278,8 +278,21 @@ def _check_finite_rows(data: _Data, X: np.ndarray, y: np.ndarray, per: int) -> N
     if bad.any():
         r = int(np.argmax(bad))
         raise ValueError(f"{data.full.source}: the model's regression is not finite at t = "
-                         f"{float(data.meas.t[r // per]):.6g} (sample {data.window_start + r // per} of the record): "
-                         "a value there overflows the effects' products; check it")
+                         f"{float(data.meas.t[r // per]):.6g}{_culprit(data)}: a value overflows the effects' "
+                         "products; check it")
+
+
+def _culprit(data: _Data) -> str:
+    """Where the record holds a value beyond 1e100 (the prefilter spreads it over its neighbours)."""
+    from ..measurements import COLUMNS
+
+    full = data.full.data
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(full) | (np.abs(full) > 1e100)
+    if not bad.any():
+        return ""
+    r, c = (int(i) for i in np.argwhere(bad)[0])
+    return f" (from sample {r} of the record, t = {float(full[r, 0]):.6g}: {COLUMNS[c]} = {float(full[r, c])!r})"
 
 
 def make_robust(data: _Data, comp: Comparison, alpha: float = 0.05) -> Comparison:
