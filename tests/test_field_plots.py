@@ -377,3 +377,18 @@ def test_report_figures_all_drawn_with_units_and_accept_ax(tmp_path):
     for h in ("Bode and polar plots", "Orbits", "Waterfall", "Campbell diagram", "Parameter tracks"):
         assert f"<h2>{h}</h2>" in text
     assert 'alt="residual_after"' in text
+
+
+def test_order_vectors_agree_with_the_measurements_order_track():
+    """The lead's order tracker (trapezoid DFT against phi) and this least-squares one read
+    the same 1X vectors and speeds from the same revolutions (to the trapezoid's accuracy)."""
+    vectors = pytest.importorskip("rotor_env.measurements.vectors")
+    t, phi, *_ = _shaft(20001)
+    x = 7.0 * np.cos(phi - 0.9) + 1.5 * np.cos(2 * phi)
+    t_mid, speed, mine = fp.order_vectors(t, x, phi)
+    theirs = vectors.order_track(t, x, phi)
+    n = min(len(speed), len(theirs.speed))
+    np.testing.assert_allclose(theirs.speed[:n], speed[:n], rtol=1e-6)
+    np.testing.assert_allclose(theirs.vectors[1][:n], mine[1][:n], atol=1e-3 * 7.0)
+    # fitting 1X alone, the 2X does not leak in (samples weighted by the angle they cover)
+    np.testing.assert_allclose(mine[1], 7.0 * np.exp(-0.9j), atol=1e-3)

@@ -124,7 +124,8 @@ def order_vectors(
     convention), a complex one (``z = th_y + i th_x``) as ``z ≈ a0 + sum_n X_n e^{i n phi}``
     with signed orders (``-1``: backward).  The fit uses the sampled ``phi`` itself, so an
     accelerating shaft (samples not uniform in angle) is exact for a signal made of these
-    orders; for whole revolutions it is the DFT against ``phi``.  ``speed`` is the mean
+    orders; each sample weighted by the angle it covers, it is otherwise the DFT against
+    ``phi`` (orders not fitted leak in only to the trapezoid's accuracy).  ``speed`` is the mean
     speed of each revolution, ``2 pi revolutions / (t_b - t_a)`` in rad per time unit;
     ``t_mid`` the middle of it.  A block with too few samples gives NaN.
     """
@@ -143,29 +144,37 @@ def order_vectors(
     bounds = np.searchsorted(t, times)
     for j in range(n_blocks):
         a, b = bounds[j], bounds[j + 1]
-        fitted = _fit_orders(phi[a:b], x[a:b], orders)
+        fitted = _fit_orders(phi[a:b], x[a:b], orders, (marks[j], marks[j + 1]))
         for o in orders:
             out[o][j] = fitted[o]
     return t_mid, speed, out
 
 
-def _fit_orders(phi: np.ndarray, x: np.ndarray, orders: Sequence[int]) -> dict[int, complex]:
+def _fit_orders(phi: np.ndarray, x: np.ndarray, orders: Sequence[int],
+                span: tuple[float, float] | None = None) -> dict[int, complex]:
     """Least squares of the samples against a constant and the ``orders`` of ``phi``: a
     real ``x ≈ a0 + sum Re(X_n e^{i n phi})``, a complex ``x ≈ a0 + sum X_n e^{i n phi}``
-    (order 0 is ``a0``).  NaN with too few samples."""
+    (order 0 is ``a0``).  ``span``: the block's end angles (the keyphasor marks), so the
+    weights cover the whole block.  NaN with too few samples."""
     real = not np.iscomplexobj(x)
     n_cols = 1 + (2 if real else 1) * len([o for o in orders if o != 0])
     if len(x) < n_cols + 2:
         return {o: complex(np.nan, np.nan) for o in orders}
+    # each sample weighted by the angle it stands for (trapezoid in phi): on an accelerating
+    # shaft the samples crowd at the start of a turn, and unweighted, the orders not fitted
+    # (2X when fitting 1X) would leak in; weighted, the fit is the DFT against phi
+    lo, hi = span if span is not None else (phi[0], phi[-1])
+    edges = np.concatenate([[lo], 0.5 * (phi[1:] + phi[:-1]), [hi]])
+    sw = np.sqrt(np.abs(np.diff(edges)))[:, None]
     if real:
         cols = [np.ones(len(x))]
         for o in orders:
             cols += [np.cos(o * phi), -np.sin(o * phi)]  # Re(X e^{i o phi}) = Re X cos - Im X sin
-        coef, *_ = np.linalg.lstsq(np.column_stack(cols), x, rcond=None)
+        coef, *_ = np.linalg.lstsq(np.column_stack(cols) * sw, x * sw[:, 0], rcond=None)
         return {o: complex(coef[1 + 2 * q], coef[2 + 2 * q]) for q, o in enumerate(orders)}
     moving = [o for o in orders if o != 0]
     A = np.column_stack([np.ones(len(x))] + [np.exp(1j * o * phi) for o in moving])
-    coef, *_ = np.linalg.lstsq(A, x.astype(complex), rcond=None)
+    coef, *_ = np.linalg.lstsq(A * sw, x.astype(complex) * sw[:, 0], rcond=None)
     out = {o: complex(coef[1 + q]) for q, o in enumerate(moving)}
     if 0 in orders:
         out[0] = complex(coef[0])
@@ -377,7 +386,8 @@ def plot_orbit(
         xx, yy = np.interp(tt, t, x), np.interp(tt, t, y)
         speed = float(speed_from_rad(abs(marks[j + 1] - marks[j]) / (tb - ta), speed_unit))
         # the 1X fit on the samples themselves (the interpolated ends only close the curve)
-        X, Y = _fit_orders(phi[sel], x[sel], (1,))[1], _fit_orders(phi[sel], y[sel], (1,))[1]
+        ends = (marks[j], marks[j + 1])
+        X, Y = _fit_orders(phi[sel], x[sel], (1,), ends)[1], _fit_orders(phi[sel], y[sel], (1,), ends)[1]
         colour = f"C{k}" if len(set(map(id, axes))) == 1 else "C0"
         when = f"t = {tc:.4g} {'' if time_unit == 'dimensionless' else time_unit}".rstrip()
         tag = f"{when}, {speed:.4g} {'(speed)' if speed_unit == 'dimensionless' else speed_unit}"
