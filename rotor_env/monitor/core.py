@@ -281,12 +281,16 @@ class Monitor:
         delta, se_delta = row[o + 2 * qm : o + 2 * qm + q], row[o + 3 * qm : o + 3 * qm + q]
         after = before + delta
         se_after = np.sqrt(se_before**2 + se_delta**2)
-        # present = its coefficients differ from 0 by more than 3 standard errors
+        # before: present when its coefficients differ from 0 by more than 3 standard
+        # errors; a change from nothing is an appearance.  After: gone when within 3
+        # standard errors of 0 or below 5 % of the size its plausible bounds allow (what
+        # the errors in the regressors can leave behind is not an effect)
+        relevant = 0.05 * self._scales[g]
         present_before = bool(np.any(np.abs(before) > 3.0 * se_before))
-        present_after = bool(np.any(np.abs(after) > 3.0 * se_after))
-        if present_after and not present_before:
+        present_after = bool(np.any(np.abs(after) > np.maximum(3.0 * se_after, relevant)))
+        if not present_before:
             kind = "appeared"
-        elif present_before and not present_after:
+        elif not present_after:
             kind = "disappeared"
         else:
             kind = "changed"

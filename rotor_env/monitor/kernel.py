@@ -30,8 +30,10 @@ C_LAMBDA, C_RTOL, C_FLOOR2, C_STICK, C_STICK_SIGMAS, C_IDENT_FRAC, C_K, C_H, C_C
     C_RESTART, C_BLOCK, C_LAGS, C_MIN_ROWS, C_WINDOW = range(15)
 N_CFG = 15
 # mon entries (scalars of the state)
-M_GAMMA_N, M_SIG_TH2, M_SIG_W2, M_NOISE_N, M_BLOCKS, M_LAST_T, M_LAST_SPEED, M_ALARMS = range(8)
-N_MON = 8
+M_GAMMA_N, M_SIG_TH2, M_SIG_W2, M_NOISE_N, M_BLOCKS, M_LAST_T, M_LAST_SPEED, M_ALARMS, M_HOLD, M_PENDING = range(10)
+N_MON = 10
+#: blocks after an alarm during which no CUSUM runs: the reference learns the changed model
+HOLD_BLOCKS = 2.0
 # per-effect arrays: eff[g, :]
 E_KAPPA, E_KAPPA_N, E_S, E_ON_T, E_ON_SPEED, E_ON_BLOCKS, E_ON_CHI, E_COUNTED, E_CLIP, E_CWIN, E_Q = range(11)
 N_EFF = 11
@@ -194,6 +196,7 @@ def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, g
         stick = max(cfg[C_STICK],
                     cfg[C_STICK_SIGMAS] * math.sqrt(mon[M_SIG_W2] + speed_max * speed_max * mon[M_SIG_TH2]))
         k = keep_moving_rows(blk, Xb, yb, per, stick)
+        restart = False
         informative = k >= per * B // 2 and sums[0] >= cfg[C_MIN_ROWS]
         if informative:
             # --- the reference before the block
@@ -307,7 +310,7 @@ def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, g
                     se_max = max(se_max, math.sqrt(max(v * kap, 0.0)))
                 if not se_max <= cfg[C_IDENT_FRAC] * scales[g]:
                     continue
-                calibrated = eff[g, E_KAPPA_N] >= cfg[C_CAL_BLOCKS]
+                calibrated = eff[g, E_KAPPA_N] >= cfg[C_CAL_BLOCKS] and mon[M_HOLD] == 0.0
                 if calibrated:
                     eff[g, E_COUNTED] += 1.0
                     z = evidence_z(chi / kap, q)
@@ -341,6 +344,14 @@ def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, g
                 eff[g, E_KAPPA_N] += 1.0
                 wk = max(1.0 / eff[g, E_KAPPA_N], cfg[C_CAL_W])
                 eff[g, E_KAPPA] += wk * (min(chi, eff[g, E_CLIP]) / eff[g, E_CWIN] - eff[g, E_KAPPA])
+            if best >= 0 and mon[M_PENDING] == 0.0:
+                # a crossing: decide which effect on the next block too. The block that
+                # crosses first usually straddles the change, and a step inside a block
+                # projects onto other effects' columns; the next block is all after it
+                mon[M_PENDING] = 1.0
+                best = -1
+            elif mon[M_PENDING] != 0.0:
+                mon[M_PENDING] = 0.0
             if best >= 0:
                 g = best
                 q = int(eff[g, E_Q])
@@ -371,21 +382,7 @@ def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, g
                             v += Ainv[a, i] * sumV[g, i, j] * Ainv[j, a]
                     ev[N_EV_FIXED + 3 * qmax + a] = math.sqrt(max(v, 0.0))
                 mon[M_ALARMS] += 1.0
-                # restart: the reference forgets the past (the model changed), every
-                # CUSUM starts again once the reference knows the effects anew
-                rs = cfg[C_RESTART]
-                srs = math.sqrt(rs)
-                for i in range(size):
-                    for j in range(i, size):
-                        R[i, j] *= srs
-                for j in range(n):
-                    col_sq[j] *= rs
-                sums[1] *= rs
-                sums[2] *= rs * rs
-                for g2 in range(G):
-                    eff[g2, E_S] = 0.0
-                if ring_n[0] > 0:
-                    ring_n[0] = 0  # the window restarts with the factor
+                restart = True
             # --- the pooled residual autocovariance, from the block's own full fit (a change
             # of the coefficients is fitted away; what is left is noise and misfit)
             m_all = 0
@@ -420,6 +417,27 @@ def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, g
         update_blocks(R, col_sq, sums, Xb[:k], yb[:k], cfg[C_LAMBDA])
         if cfg[C_WINDOW] > 0:
             _window_update(R, col_sq, sums, Xb[:k], yb[:k], ring_X, ring_y, ring_n, int(cfg[C_WINDOW]), per * B)
+        if restart:
+            # the model changed: the reference forgets the past, the alarm's block included
+            # (it straddles the change), and every CUSUM starts again once the reference
+            # knows the effects anew (the gates hold them until then)
+            rs = cfg[C_RESTART]
+            srs = math.sqrt(rs)
+            for i in range(size):
+                for j in range(i, size):
+                    R[i, j] *= srs
+            for j in range(n):
+                col_sq[j] *= rs
+            sums[1] *= rs
+            sums[2] *= rs * rs
+            for g2 in range(G):
+                eff[g2, E_S] = 0.0
+            ring_n[0] = 0  # a sliding window restarts with the factor (old rows keep weight rs)
+            # uniform discounting leaves the reference's covariance as it was (only relative
+            # weights count): hold the tests until new blocks have replaced the old model
+            mon[M_HOLD] = HOLD_BLOCKS
+        elif mon[M_HOLD] > 0.0 and informative:
+            mon[M_HOLD] -= 1.0
         mon[M_BLOCKS] += 1.0
         mon[M_LAST_T] = blk[B - 1, 0]
         mon[M_LAST_SPEED] = blk[B - 1, 2]
