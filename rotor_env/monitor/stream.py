@@ -16,7 +16,9 @@ arrive (or the stream ends).  An encoder's ``phi`` wrapped to one turn is unwrap
 from __future__ import annotations
 
 import csv
+import io
 import math
+import select
 import sys
 import time
 from collections.abc import Iterator
@@ -87,8 +89,23 @@ class StreamReader:
                 fh.close()
 
     def _read(self, fh: BinaryIO) -> bytes:
+        """What is there now, up to ``chunk_bytes``: a pipe hands out 64 KiB per read, so keep
+        reading while more is ready (never waiting: a live source must not be held up)."""
         read1 = getattr(fh, "read1", None)
-        return read1(self.chunk_bytes) if read1 is not None else fh.read(self.chunk_bytes)
+        if read1 is None:
+            return fh.read(self.chunk_bytes)
+        out = read1(self.chunk_bytes)
+        try:
+            fd = fh.fileno()
+        except (OSError, ValueError, io.UnsupportedOperation):
+            return out
+        parts = [out]
+        size = len(out)
+        while out and size < self.chunk_bytes and select.select([fd], [], [], 0)[0]:
+            out = read1(self.chunk_bytes - size)
+            parts.append(out)
+            size += len(out)
+        return b"".join(parts)
 
     def _more(self, fh: BinaryIO) -> Iterator[bytes]:
         """Blocks of bytes; with ``follow``, waits at the end for the file to grow."""
