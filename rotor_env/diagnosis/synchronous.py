@@ -290,11 +290,19 @@ def _transient(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: 
     h = min(0.05, 2 * math.pi / (48.0 * w_max))
     t0, t1 = float(tau[0]) - lead, float(tau[-1]) + 2 * math.pi / max(float(W[-1]), 1e-3)
     grid = np.arange(t0, t1 + h, h)
-    Wg = np.where(grid < tau[0], W[0], np.where(grid > tau[-1], W[-1], speed(np.clip(grid, tau[0], tau[-1]))))
-    Wg = np.maximum(Wg, 1e-9)
+    # before the first row the profile goes on as it came in (linearly): the first row's
+    # revolution starts half a turn before its mid-time, and its angle must be the data's
+    slope0 = (W[1] - W[0]) / (tau[1] - tau[0]) if len(W) > 1 else 0.0
+    before = W[0] + slope0 * (grid - tau[0])
+    Wg = np.where(grid < tau[0], before, np.where(grid > tau[-1], W[-1], speed(np.clip(grid, tau[0], tau[-1]))))
+    Wg = np.maximum(Wg, 0.2 * float(W.min()))
     phi = np.concatenate(([0.0], np.cumsum(0.5 * (Wg[1:] + Wg[:-1]) * np.diff(grid))))
     # a row is one revolution whose mid-time is t and whose speed is 2 pi / its duration
-    # (what per-revolution trackers report): it starts at t - pi / W, not at phi(t) - pi
+    # (what per-revolution trackers report): it starts at t - pi / W, at a keyphasor pulse.
+    # The angle is zero at the pulses, as in the data: a probe's 1X vector also holds the
+    # mirror image of the free whirl (a real signal), which turns with twice the angle
+    # offset — the model's angle must be the data's, not just differ by a constant.
+    phi -= np.interp(tau[0] - math.pi / W[0], grid, phi)
     phi_rows = np.interp(tau - math.pi / W, grid, phi) + math.pi
     accel = compile_accel(model.layout)
     out = np.empty((len(tau), 2, len(forcing_coefs)), dtype=complex)

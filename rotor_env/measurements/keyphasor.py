@@ -1,0 +1,81 @@
+"""Keyphasor: once-per-revolution pulses -> spin angle, speed and acceleration.
+
+A keyphasor probe sees a notch (or a projection) on the shaft once per turn.  Each
+pulse's leading edge is found where the signal crosses a threshold (default halfway
+between the signal's low and high levels, the 1st and 99th percentiles), the time
+interpolated linearly between the two samples around the crossing.  A sampled edge is
+only known to within a sample (a square pulse: +-dt/2, 0.1 rad at 3000 rpm and 5 kHz),
+and that jitter would put a false wobble into the angle, the speed and every order-
+tracked vector; so the spin angle is a smoothing spline through ``(edge k, 2 pi k)``,
+its smoothness chosen by generalised cross-validation (continuous speed and
+acceleration).  The record is cut to the span between the first and the last pulse.
+The leading edge is the transition into the pulse's short state: a notch gives a brief
+dip, a projection a brief rise — the state the signal spends less time in.
+
+Checks (a clear error naming the file, column, time and line): too few pulses; a
+revolution twice as long as its neighbours (a missed pulse) or half as long (a
+double trigger, noise): ``period / median of its 4 neighbours`` outside [0.6, 1.6].
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.interpolate import make_smoothing_spline
+
+__all__ = ["KeyphasorError", "pulse_edges", "spin_from_pulses"]
+
+MIN_PULSES = 5
+#: a revolution this much longer (shorter) than its neighbours is a missed (extra) pulse
+PERIOD_RATIO = (0.6, 1.6)
+
+
+class KeyphasorError(ValueError):
+    """Keyphasor pulses that cannot give the spin angle."""
+
+
+def pulse_edges(t: np.ndarray, signal: np.ndarray, threshold: float | None = None, *, where: str = "keyphasor",
+                lines: np.ndarray | None = None) -> np.ndarray:
+    """Times of the pulses' leading edges (see the module docstring)."""
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(signal, dtype=float)
+    lo, hi = np.percentile(x, [1.0, 99.0])
+    if not hi > lo:
+        raise KeyphasorError(f"{where}: the signal is constant ({lo:g}): no pulses")
+    thr = 0.5 * (lo + hi) if threshold is None else float(threshold)
+    if not lo < thr < hi:
+        raise KeyphasorError(f"{where}: threshold {thr:g} is outside the signal's range [{lo:g}, {hi:g}]")
+    high = x > thr
+    # the pulse is the short state: a projection is high briefly, a notch low briefly
+    pulse_high = high.mean() < 0.5
+    state = high if pulse_high else ~high
+    k = np.nonzero(~state[:-1] & state[1:])[0]  # last sample before the edge
+    if len(k) < MIN_PULSES:
+        raise KeyphasorError(f"{where}: only {len(k)} pulses found (threshold {thr:g}); at least {MIN_PULSES} "
+                             "revolutions are needed")
+    frac = (thr - x[k]) / (x[k + 1] - x[k])
+    edges = t[k] + frac * (t[k + 1] - t[k])
+    period = np.diff(edges)
+    for i in range(len(period)):
+        nb = np.concatenate([period[max(0, i - 2) : i], period[i + 1 : i + 3]])
+        if len(nb) == 0:
+            continue
+        ratio = period[i] / np.median(nb)
+        if not PERIOD_RATIO[0] <= ratio <= PERIOD_RATIO[1]:
+            kind = "missing pulse" if ratio > 1 else "extra pulse (double trigger or noise)"
+            line = f", line {lines[k[i] + 1]}" if lines is not None else ""
+            raise KeyphasorError(
+                f"{where}{line}: irregular pulses at t = {edges[i]:.6g}: a revolution of {period[i]:.4g} between "
+                f"pulses {i + 1} and {i + 2}, {ratio:.2f}x its neighbours ({kind}); check the threshold "
+                f"(now {thr:g}) or the keyphasor signal"
+            )
+    return edges
+
+
+def spin_from_pulses(t: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(inside, phi, speed, acceleration)`` at the samples ``t[inside]`` between the first and last edge."""
+    spline = make_smoothing_spline(edges, 2.0 * math.pi * np.arange(len(edges)))
+    inside = (t >= edges[0]) & (t <= edges[-1])
+    ti = t[inside]
+    return inside, spline(ti), spline.derivative(1)(ti), spline.derivative(2)(ti)

@@ -1,0 +1,260 @@
+"""The rig description: how a test rig's recordings map onto the model.
+
+A YAML or JSON file; every key is optional except the probes.  A one-plane rig with
+two probes and a keyphasor needs three lines::
+
+    keyphasor: kp                 # column of the once-per-revolution pulse
+    probes: {x: 45, y: -45}       # column -> mounting angle (degrees)
+    units: {displacement: um}
+
+The full set, with defaults::
+
+    time: t                       # column of time
+    units:
+      time: s                     # s | ms
+      displacement: um            # um | mil | mm | m | V | mV
+      sensitivity_mv_per_um: 7.87 # needed for V / mV (API 670: 7.87 mV/um = 200 mV/mil)
+      speed: rpm                  # rpm | rad/s | hz (for a speed column)
+    keyphasor: kp                 # or ...
+    speed: null                   # ... a speed column (spin angle by integration)
+    keyphasor_threshold: null     # default: halfway between the pulse's low and high levels
+    probes:                       # a list for two planes:
+      - {name: x1, angle_deg: 45, plane: A}
+      - {name: y1, angle_deg: -45, plane: A}
+      - {name: x2, angle_deg: 45, plane: B}
+      - {name: y2, angle_deg: -45, plane: B}
+    planes: {A: {axial_position_m: 0.0}, B: {axial_position_m: 0.25}}
+    model: auto                   # translation (one plane, Jeffcott, ip = 0) | tilt (two planes) | auto
+    disk: {ip: 0.0}               # or polar_inertia_kg_m2 and diametral_inertia_kg_m2; mass_kg
+    slow_roll_rpm: null           # runout taken from the revolutions below this speed
+
+**Angles** are measured from the reference direction (e.g. top dead centre) *in the
+direction of rotation*, in degrees.  The model's ``u`` axis is the reference, ``v`` is
+90 degrees further in the direction of rotation, so a forward whirl turns from ``u`` to
+``v`` (docs/PHYSICS.md 1.2: ``z = u + i v = th_y + i th_x``).  A probe reads the
+displacement towards itself, ``p = u cos(angle) + v sin(angle)``.
+
+Every error names the file and the key (``probes[1].angle_deg``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["DISPLACEMENT_UNITS", "Probe", "Rig", "RigError", "load_rig"]
+
+#: displacement unit -> metres (V and mV divide by the sensitivity first)
+DISPLACEMENT_UNITS: dict[str, float] = {"um": 1e-6, "µm": 1e-6, "mil": 25.4e-6, "mm": 1e-3, "m": 1.0}
+VOLT_UNITS: dict[str, float] = {"V": 1000.0, "mV": 1.0}  # -> mV
+TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3}
+SPEED_UNITS: dict[str, float] = {"rpm": 2.0 * math.pi / 60.0, "rad/s": 1.0, "hz": 2.0 * math.pi}
+#: two probes of a plane closer than this (mod 180 degrees) cannot resolve the orbit
+MIN_PROBE_SEPARATION_DEG = 20.0
+_TOP_KEYS = {"time", "units", "keyphasor", "speed", "keyphasor_threshold", "probes", "planes", "model", "disk",
+             "slow_roll_rpm"}
+
+
+class RigError(ValueError):
+    """A rig description that cannot be used as it is."""
+
+
+@dataclass(frozen=True)
+class Probe:
+    """One proximity probe: its column, mounting angle (rad, in the direction of rotation) and plane."""
+
+    name: str
+    angle: float
+    plane: str = "A"
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A validated rig description (see the module docstring for the file format)."""
+
+    probes: tuple[Probe, ...]
+    keyphasor: str | None = "kp"
+    speed: str | None = None
+    time: str = "t"
+    time_unit: str = "s"
+    displacement: str = "um"
+    sensitivity_mv_per_um: float | None = None
+    speed_unit: str = "rpm"
+    keyphasor_threshold: float | None = None
+    planes: dict[str, float] = field(default_factory=dict)  #: plane -> axial position (m)
+    model: str = "translation"
+    ip: float = 0.0
+    mass_kg: float | None = None
+    slow_roll_rpm: float | None = None
+    source: str = ""
+
+    @property
+    def plane_names(self) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(p.plane for p in self.probes))
+
+    def to_metres(self, value):
+        """Probe reading (in the rig's displacement unit) -> metres."""
+        if self.displacement in VOLT_UNITS:
+            return value * VOLT_UNITS[self.displacement] / self.sensitivity_mv_per_um * 1e-6
+        return value * DISPLACEMENT_UNITS[self.displacement]
+
+    @property
+    def amp_unit(self) -> str:
+        """The unit results are reported in (volts are reported in um)."""
+        return "um" if self.displacement in VOLT_UNITS or self.displacement == "µm" else self.displacement
+
+    @classmethod
+    def one_plane(cls, angles: dict[str, float], **kwargs) -> Rig:
+        """A one-plane rig from ``{probe column: angle in degrees}``."""
+        return _build({"probes": dict(angles), **kwargs}, "<rig>")
+
+
+def load_rig(path: str | os.PathLike) -> Rig:
+    """Read and validate a rig description (``.yaml``/``.yml`` or ``.json``)."""
+    path = Path(path)
+    if not path.is_file():
+        raise RigError(f"{path}: no such rig description")
+    text = path.read_text(encoding="utf-8")
+    if path.suffix.lower() in (".yaml", ".yml"):
+        try:
+            import yaml
+        except ImportError:  # pragma: no cover - pyyaml is a dependency
+            raise RigError(f"{path}: reading YAML needs pyyaml (pip install pyyaml), or write the rig as JSON") from None
+        try:
+            raw = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise RigError(f"{path}: not valid YAML ({exc})") from None
+    else:
+        try:
+            raw = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise RigError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    if not isinstance(raw, dict):
+        raise RigError(f"{path}: a rig description is a mapping of keys (probes, keyphasor, units, ...)")
+    return _build(raw, str(path))
+
+
+def _num(where: str, key: str, value, *, positive: bool = False, allow_none: bool = False) -> float | None:
+    if value is None and allow_none:
+        return None
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise RigError(f"{where}: key {key!r}: {value!r} is not a number") from None
+    if not math.isfinite(v) or (positive and v <= 0):
+        raise RigError(f"{where}: key {key!r}: {value!r} must be a {'positive' if positive else 'finite'} number")
+    return v
+
+
+def _choice(where: str, key: str, value, options) -> str:
+    if value not in options:
+        raise RigError(f"{where}: key {key!r}: {value!r} is not one of {', '.join(map(str, options))}")
+    return value
+
+
+def _build(raw: dict, where: str) -> Rig:
+    unknown = sorted(set(raw) - _TOP_KEYS)
+    if unknown:
+        raise RigError(f"{where}: unknown key(s) {unknown}; known: {sorted(_TOP_KEYS)}")
+    units = raw.get("units") or {}
+    if not isinstance(units, dict):
+        raise RigError(f"{where}: key 'units' must be a mapping (time, displacement, speed, sensitivity_mv_per_um)")
+    bad = sorted(set(units) - {"time", "displacement", "speed", "sensitivity_mv_per_um"})
+    if bad:
+        raise RigError(f"{where}: unknown key(s) under 'units': {bad}")
+    time_unit = _choice(where, "units.time", units.get("time", "s"), TIME_UNITS)
+    disp = _choice(where, "units.displacement", units.get("displacement", "um"), (*DISPLACEMENT_UNITS, *VOLT_UNITS))
+    sens = _num(where, "units.sensitivity_mv_per_um", units.get("sensitivity_mv_per_um"), positive=True,
+                allow_none=True)
+    if disp in VOLT_UNITS and sens is None:
+        raise RigError(f"{where}: key 'units.sensitivity_mv_per_um' is needed for displacement in {disp} "
+                       "(API 670 probes: 7.87 mV/um)")
+    speed_unit = _choice(where, "units.speed", units.get("speed", "rpm"), SPEED_UNITS)
+    probes_raw = raw.get("probes")
+    if probes_raw is None:
+        raise RigError(f"{where}: key 'probes' is missing (e.g. probes: {{x: 45, y: -45}})")
+    items: list[dict] = []
+    if isinstance(probes_raw, dict):
+        for name, ang in probes_raw.items():
+            items.append({"name": name, "angle_deg": ang})
+    elif isinstance(probes_raw, list):
+        items = probes_raw
+    else:
+        raise RigError(f"{where}: key 'probes' must be a mapping name -> angle or a list of probes")
+    probes = []
+    for i, item in enumerate(items):
+        key = f"probes[{i}]" if isinstance(probes_raw, list) else f"probes.{item.get('name')}"
+        if not isinstance(item, dict) or "name" not in item or "angle_deg" not in item:
+            raise RigError(f"{where}: key {key!r}: each probe needs 'name' and 'angle_deg'")
+        extra = sorted(set(item) - {"name", "angle_deg", "plane", "axial_position_m"})
+        if extra:
+            raise RigError(f"{where}: key {key!r}: unknown key(s) {extra}")
+        ang = _num(where, f"{key}.angle_deg", item["angle_deg"])
+        if abs(ang) > 360:
+            raise RigError(f"{where}: key '{key}.angle_deg': {ang:g} is not an angle in degrees (-360..360)")
+        probes.append(Probe(str(item["name"]), math.radians(ang), str(item.get("plane", "A"))))
+    names = [p.name for p in probes]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise RigError(f"{where}: key 'probes': probe name(s) {sorted(dup)} appear more than once")
+    planes_raw = raw.get("planes") or {}
+    planes: dict[str, float] = {}
+    for pl in dict.fromkeys(p.plane for p in probes):
+        members = [p for p in probes if p.plane == pl]
+        if len(members) < 2:
+            raise RigError(f"{where}: key 'probes': plane {pl!r} has {len(members)} probe; an orbit needs two "
+                           "(an X-Y pair)")
+        a, b = members[0], members[1]
+        sep = abs(math.degrees(a.angle - b.angle)) % 180.0
+        if min(sep, 180.0 - sep) < MIN_PROBE_SEPARATION_DEG:
+            raise RigError(f"{where}: key 'probes' ({a.name}, {b.name}): mounting angles "
+                           f"{math.degrees(a.angle):g} and {math.degrees(b.angle):g} deg are (nearly) collinear; "
+                           "an X-Y pair is mounted 90 deg apart")
+        pos = planes_raw.get(pl, {}) if isinstance(planes_raw, dict) else {}
+        planes[pl] = _num(where, f"planes.{pl}.axial_position_m", pos.get("axial_position_m", 0.0))
+    model = raw.get("model", "auto")
+    _choice(where, "model", model, ("auto", "translation", "tilt"))
+    if model == "auto":
+        model = "tilt" if len(planes) >= 2 else "translation"
+    if model == "tilt":
+        if len(planes) != 2:
+            raise RigError(f"{where}: key 'model': tilt needs exactly two measurement planes, the rig has {len(planes)}")
+        z = list(planes.values())
+        if abs(z[1] - z[0]) <= 0:
+            raise RigError(f"{where}: key 'planes': the two planes need different axial_position_m for the tilt")
+    disk = raw.get("disk") or {}
+    if not isinstance(disk, dict):
+        raise RigError(f"{where}: key 'disk' must be a mapping")
+    bad = sorted(set(disk) - {"ip", "polar_inertia_kg_m2", "diametral_inertia_kg_m2", "mass_kg"})
+    if bad:
+        raise RigError(f"{where}: unknown key(s) under 'disk': {bad}")
+    if "ip" in disk:
+        ip = _num(where, "disk.ip", disk["ip"])
+    elif "polar_inertia_kg_m2" in disk or "diametral_inertia_kg_m2" in disk:
+        ipol = _num(where, "disk.polar_inertia_kg_m2", disk.get("polar_inertia_kg_m2"), positive=True)
+        idia = _num(where, "disk.diametral_inertia_kg_m2", disk.get("diametral_inertia_kg_m2"), positive=True)
+        ip = ipol / idia
+    else:
+        ip = 0.0
+    if model == "translation":
+        ip = 0.0  # the Jeffcott rotor's translation has no gyroscopic coupling
+    if not 0.0 <= ip < 1.0:
+        raise RigError(f"{where}: key 'disk': inertia ratio ip = {ip:g} must be in [0, 1) for this model "
+                       "(a disk with I_p >= I_t has no forward critical)")
+    mass = _num(where, "disk.mass_kg", disk.get("mass_kg"), positive=True, allow_none=True)
+    kp, sp = raw.get("keyphasor", None), raw.get("speed", None)
+    if kp is None and sp is None:
+        kp = "kp"
+    if kp is not None and sp is not None:
+        raise RigError(f"{where}: keys 'keyphasor' and 'speed': give one (the spin angle comes from either)")
+    return Rig(
+        probes=tuple(probes), keyphasor=kp, speed=sp, time=str(raw.get("time", "t")), time_unit=time_unit,
+        displacement=disp, sensitivity_mv_per_um=sens, speed_unit=speed_unit,
+        keyphasor_threshold=_num(where, "keyphasor_threshold", raw.get("keyphasor_threshold"), allow_none=True),
+        planes=planes, model=model, ip=ip, mass_kg=mass,
+        slow_roll_rpm=_num(where, "slow_roll_rpm", raw.get("slow_roll_rpm"), positive=True, allow_none=True),
+        source=where,
+    )

@@ -1,0 +1,133 @@
+"""Simulated rig recordings: the model's run written as a rig would record it.
+
+The simulator runs in dimensionless units; a natural frequency (rpm) maps its time to
+seconds, :data:`~.waveforms.LENGTH_UNIT` its translation to metres.  The output is what
+a data acquisition system writes — time in s, a keyphasor pulse (a notch: the signal
+dips from 0 to -5 V for 1/20 of a turn) and each probe's reading (in the rig's unit,
+with its DC gap, optional runout and Gaussian noise; the notch's edges ramp over 1/100
+of a turn, as a probe tip a few millimetres wide sees a notch) — or what a condition-monitoring
+system exports: the order-tracked vectors per revolution (:class:`~.vectors.VectorTable`).
+Everything is reproducible from ``seed``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import RotorParams
+from ..simulator import RunUp, Simulator
+from .rig import SPEED_UNITS, Rig
+from .vectors import VectorTable, order_track
+from .waveforms import LENGTH_UNIT
+
+__all__ = ["RigRun", "simulate_rig"]
+
+KEYPHASOR_LOW = -5.0
+KEYPHASOR_WIDTH = 0.05  #: of a turn
+KEYPHASOR_RAMP = 0.01  #: of a turn, each edge
+GAP_VOLTS = -10.0
+
+
+@dataclass(frozen=True)
+class RigRun:
+    """A simulated run: its columns (as a file would hold them) and the truth."""
+
+    columns: dict[str, np.ndarray]
+    natural_rpm: float
+    params: RotorParams
+
+    def vectors(self, rig: Rig, orders: tuple[int, ...] = (1, 2)) -> VectorTable:
+        """The order-tracked table of the probes (per revolution, lead convention)."""
+        t = self.columns["t"]
+        phi = self.columns["_phi"]
+        names = tuple(p.name for p in rig.probes)
+        X = np.column_stack([self.columns[n] for n in names])
+        if rig.displacement in ("V", "mV"):
+            X = np.column_stack([rig.to_metres(X[:, j] - np.mean(X[:, j])) / 1e-6 for j in range(X.shape[1])])
+        tr = order_track(t, X - X.mean(axis=0), phi, orders)
+        return VectorTable(speed=tr.speed, t=tr.t, probes=names, vectors=tr.vectors, amp_unit=rig.amp_unit,
+                           angles=np.array([p.angle for p in rig.probes]), source="simulated")
+
+    def file_columns(self) -> dict[str, np.ndarray]:
+        return {k: v for k, v in self.columns.items() if not k.startswith("_")}
+
+
+def simulate_rig(
+    rig: Rig,
+    params: RotorParams,
+    *,
+    natural_rpm: float = 1650.0,
+    rpm_from: float = 300.0,
+    rpm_to: float = 3000.0,
+    rpm_per_s: float = 230.0,
+    sample_rate: float = 5000.0,
+    noise: float = 0.0,
+    runout: float = 0.0,
+    runout_phase_deg: float = 0.0,
+    seed: int | None = None,
+) -> RigRun:
+    """Simulate a start-up (``rpm_per_s > 0``) or coast-down (``< 0``) as the rig records it.
+
+    ``noise`` and ``runout`` are in the rig's displacement unit (um, mil, ...; for volts, in
+    um); the runout is a 1X pattern fixed to the shaft, the same vector for every probe
+    seen from its own angle, as a scratch on the probe track.
+    """
+    for name, v in (("natural_rpm", natural_rpm), ("rpm_from", rpm_from), ("rpm_to", rpm_to),
+                    ("sample_rate", sample_rate)):
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be a positive number, got {v!r}")
+    if not math.isfinite(rpm_per_s) or rpm_per_s == 0 or (rpm_to - rpm_from) * rpm_per_s <= 0:
+        raise ValueError(f"rpm_per_s = {rpm_per_s!r} does not go from {rpm_from:g} to {rpm_to:g} rpm")
+    if rig.model == "tilt":
+        raise ValueError("simulated rig runs are one-plane (translation) records; the tilt rig needs a disk "
+                         "position model that is not simulated here")
+    w_ref = natural_rpm * SPEED_UNITS["rpm"]
+    duration = (rpm_to - rpm_from) / rpm_per_s
+    n = int(round(duration * sample_rate))
+    if n > 20_000_000:
+        raise ValueError(f"{n} samples ({n * 8 * (len(rig.probes) + 2) / 1e9:.1f} GB): lower the sample rate")
+    dt = 1.0 / sample_rate * w_ref
+    a = rpm_per_s * SPEED_UNITS["rpm"] / w_ref**2
+    s0 = rpm_from * SPEED_UNITS["rpm"] / w_ref
+    meas = Simulator(params).run(t_end=n * dt, dt=dt, run_up=RunUp(rate=a, speed0=s0))
+    t = meas.t / w_ref
+    phi = meas.phi
+    u = meas.theta_y * LENGTH_UNIT
+    v = meas.theta_x * LENGTH_UNIT
+    rng = np.random.default_rng(seed)
+    cols: dict[str, np.ndarray] = {"t": t}
+    if rig.keyphasor is not None:
+        frac = (phi / (2 * math.pi)) % 1.0
+        # the notch: down from the pulse's angle (the edge crosses half depth there), up again
+        down = np.clip(0.5 + frac / KEYPHASOR_RAMP, 0.0, 1.0)
+        down = np.where(frac > 0.5, np.clip(0.5 + (frac - 1.0) / KEYPHASOR_RAMP, 0.0, 1.0), down)
+        up = np.clip(0.5 + (frac - KEYPHASOR_WIDTH) / KEYPHASOR_RAMP, 0.0, 1.0)
+        kp = KEYPHASOR_LOW * np.where(frac > 0.5, down, np.minimum(down, 1.0 - up))
+        cols[rig.keyphasor] = kp
+    else:
+        cols[rig.speed] = meas.phi_dot * w_ref / SPEED_UNITS[rig.speed_unit]
+    r = runout * np.exp(1j * math.radians(runout_phase_deg))
+    for p in rig.probes:
+        metres = u * math.cos(p.angle) + v * math.sin(p.angle)
+        # the probe sees the track's runout at its own angle: phi - angle
+        reading_um = metres / 1e-6 + np.real(r * np.exp(1j * (phi - p.angle))) * _unit_um(rig)
+        reading_um = reading_um + rng.normal(0.0, noise * _unit_um(rig), len(t)) if noise > 0 else reading_um
+        if rig.displacement in ("V", "mV"):
+            volts_mv = reading_um * rig.sensitivity_mv_per_um + GAP_VOLTS * 1000.0
+            cols[p.name] = volts_mv / (1000.0 if rig.displacement == "V" else 1.0)
+        else:
+            cols[p.name] = reading_um * 1e-6 / _metres(rig)
+    cols["_phi"] = phi
+    return RigRun(cols, natural_rpm, params)
+
+
+def _metres(rig: Rig) -> float:
+    return rig.to_metres(1.0) if rig.displacement not in ("V", "mV") else 1e-6
+
+
+def _unit_um(rig: Rig) -> float:
+    """One of the rig's reporting units in um."""
+    return _metres(rig) / 1e-6

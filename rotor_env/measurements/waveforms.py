@@ -1,0 +1,200 @@
+"""Raw rig waveforms (probes and keyphasor, SI units) -> the model's dimensionless measurements.
+
+The chain, each step in its own module:
+
+1. read the columns the rig description names (:mod:`.rig`): time, keyphasor (or a
+   speed column), probes; errors name file, column, line and value;
+2. spin angle, speed and acceleration from the keyphasor pulses (:mod:`.keyphasor`);
+3. probe readings to metres (sensitivity for volts), the DC gap removed, rotated into
+   the model's axes; one plane -> translation, two planes -> tilt (:mod:`.probes`);
+4. optional slow-roll compensation: the runout pattern (probe reading against shaft
+   angle, averaged over the revolutions below ``slow_roll_rpm``) subtracted from every
+   revolution, as field engineers compensate;
+5. the time scale: ``t' = t w_ref`` with ``w_ref`` the natural frequency identified
+   from the 1X vectors (:mod:`rotor_env.diagnosis.synchronous`); displacements in units
+   of :data:`LENGTH_UNIT` (translation) or radians (tilt); resampled to at least
+   :data:`SAMPLES_PER_TURN` samples per revolution at the top speed (zero-phase FIR
+   anti-aliasing), rates estimated as for any angles-only file.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from .core import COLUMNS, Measurements
+from .keyphasor import KeyphasorError, pulse_edges, spin_from_pulses
+from .probes import to_model_axes
+from .rig import SPEED_UNITS, TIME_UNITS, Rig
+from .vectors import VectorTable, order_track
+
+__all__ = ["LENGTH_UNIT", "RigRecord", "WaveformError", "load_waveforms"]
+
+#: the model's unit of translation (m): amplitudes of rigs (10-500 um) become 0.01-0.5
+LENGTH_UNIT = 1e-3
+SAMPLES_PER_TURN = 32
+#: dimensionless sample interval aimed at (the paper's 0.01-0.05)
+TARGET_DT = 0.03
+
+
+class WaveformError(ValueError):
+    """A waveform file that does not fit its rig description."""
+
+
+@dataclass(frozen=True)
+class RigRecord:
+    """One run of a rig in SI units: time (s), spin, probes and the model's axes."""
+
+    rig: Rig
+    t: np.ndarray
+    phi: np.ndarray
+    speed: np.ndarray  #: rad/s
+    accel: np.ndarray  #: rad/s^2
+    readings: dict[str, np.ndarray]  #: probe -> reading in the rig's unit (volts converted to um)
+    u: np.ndarray  #: m (translation) or rad (tilt)
+    v: np.ndarray
+    source: str = ""
+    notes: tuple[str, ...] = ()
+
+    @property
+    def rpm(self) -> np.ndarray:
+        return self.speed / SPEED_UNITS["rpm"]
+
+    def vectors(self, orders: tuple[int, ...] = (1, 2), revolutions: int = 1) -> VectorTable:
+        """Order-tracked vectors of every probe (per revolution), in the reporting unit."""
+        names = tuple(p.name for p in self.rig.probes)
+        X = np.column_stack([self.readings[n] - self.readings[n].mean() for n in names])
+        tr = order_track(self.t, X, self.phi, orders, revolutions, upsample=4)
+        return VectorTable(speed=tr.speed, t=tr.t, probes=names, vectors=tr.vectors, amp_unit=self.rig.amp_unit,
+                           angles=np.array([p.angle for p in self.rig.probes]), source=self.source,
+                           notes=self.notes)
+
+    def compensate_runout(self, runout: dict[str, complex] | None = None, below_rpm: float | None = None) -> RigRecord:
+        """Subtract the probes' runout: a 1X vector per probe (``lead``), or the slow-roll
+        pattern of each probe against the shaft angle (revolutions below ``below_rpm``)."""
+        new = {}
+        note = ""
+        if runout is not None:
+            for n, x in self.readings.items():
+                new[n] = x - np.real(runout.get(n, 0.0) * np.exp(1j * self.phi))
+            note = "1X runout vectors subtracted"
+        else:
+            slow = self.rpm < below_rpm
+            turns = np.floor(self.phi / (2 * math.pi))
+            full = np.unique(turns[slow])
+            if len(full) < 2:
+                raise WaveformError(f"{self.source}: slow_roll_rpm {below_rpm:g}: fewer than two revolutions below "
+                                    f"it (the slowest is {self.rpm.min():.0f} rpm)")
+            bins = 64
+            idx = ((self.phi % (2 * math.pi)) / (2 * math.pi) * bins).astype(int) % bins
+            for n, x in self.readings.items():
+                xs = x - x.mean()
+                pattern = np.bincount(idx[slow], xs[slow], bins) / np.maximum(np.bincount(idx[slow], None, bins), 1)
+                pattern -= pattern.mean()
+                centres = (np.arange(bins) + 0.5) / bins * 2 * math.pi
+                ang = self.phi % (2 * math.pi)
+                new[n] = x - np.interp(ang, centres, pattern, period=2 * math.pi)
+            note = f"slow-roll runout (below {below_rpm:g} rpm, {len(full)} revolutions) subtracted"
+        u, v = to_model_axes(self.rig, new)
+        return replace(self, readings=new, u=u, v=v, notes=(*self.notes, note))
+
+    def to_measurements(self, w_ref: float) -> Measurements:
+        """Dimensionless measurements with ``t' = t w_ref`` (see the module docstring)."""
+        from scipy.signal import decimate
+
+        from ..io import derive_rates
+
+        dt_raw = float(np.median(np.diff(self.t))) * w_ref
+        top = float(self.speed.max()) / w_ref
+        target = min(TARGET_DT, 2 * math.pi / (SAMPLES_PER_TURN * max(top, 1e-9)))
+        q = max(1, int(target // dt_raw))
+        scale = LENGTH_UNIT if self.rig.model == "translation" else 1.0
+        if q > 1:
+            u = decimate(self.u, q, ftype="fir", zero_phase=True)
+            v = decimate(self.v, q, ftype="fir", zero_phase=True)
+            sel = slice(None, None, q)
+        else:
+            u, v, sel = self.u, self.v, slice(None)
+        t = (self.t[sel] - self.t[0]) * w_ref
+        n = min(len(t), len(u))
+        out = np.empty((n, len(COLUMNS)))
+        out[:, 0] = t[:n]
+        out[:, 1] = self.phi[sel][:n]
+        out[:, 2] = self.speed[sel][:n] / w_ref
+        out[:, 3] = self.accel[sel][:n] / w_ref**2
+        out[:, 4] = v[:n] / scale  # th_x = v
+        out[:, 5] = u[:n] / scale  # th_y = u
+        for j, src in ((6, 4), (7, 5)):
+            out[:, j] = derive_rates(out[:, 0], out[:, src], 1)
+        for j, src in ((8, 4), (9, 5)):
+            out[:, j] = derive_rates(out[:, 0], out[:, src], 2)
+        unit = "mm" if self.rig.model == "translation" else "rad"
+        return Measurements(out, source=f"{self.source} (rig: {self.rig.model} in {unit}, t' = t * {w_ref:.6g}/s, "
+                                        f"every {q} samples)")
+
+
+def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
+    """Read a waveform file (CSV or Parquet) as the rig describes it."""
+    from ..io import MeasurementError, read_table
+
+    path = Path(path)
+    try:
+        header, data, lines = read_table(path)
+    except MeasurementError as exc:
+        raise WaveformError(str(exc)) from None
+    col = {h.strip(): i for i, h in enumerate(header)}
+    needed = [rig.time, *(p.name for p in rig.probes), rig.keyphasor or rig.speed]
+    missing = [c for c in needed if c not in col]
+    if missing:
+        raise WaveformError(f"{path}: column(s) {missing} named in the rig description ({rig.source}) are not in "
+                            f"the file (it has {list(col)})")
+    if data.shape[0] < 100:
+        raise WaveformError(f"{path}: only {data.shape[0]} rows: a run-up needs many revolutions of samples")
+    for c in needed:
+        x = data[:, col[c]]
+        bad = ~np.isfinite(x)
+        if bad.any():
+            r = int(np.argmax(bad))
+            raise WaveformError(f"{path}, line {lines[r]}, column {c!r}: value {x[r]!r} is not finite")
+    t = data[:, col[rig.time]] * TIME_UNITS[rig.time_unit]
+    step = np.diff(t)
+    if (step <= 0).any():
+        r = int(np.argmax(step <= 0)) + 1
+        raise WaveformError(f"{path}, line {lines[r]}, column {rig.time!r}: time {t[r]!r} does not increase")
+    dt = float(np.median(step))
+    if np.any(np.abs(step - dt) > 1e-3 * dt):
+        r = int(np.argmax(np.abs(step - dt) > 1e-3 * dt)) + 1
+        raise WaveformError(f"{path}, line {lines[r]}, column {rig.time!r}: non-uniform sampling "
+                            f"(step {step[r - 1]:.6g} s where the file's is {dt:.6g} s)")
+    if rig.keyphasor is not None:
+        try:
+            edges = pulse_edges(t, data[:, col[rig.keyphasor]], rig.keyphasor_threshold,
+                                where=f"{path}, column {rig.keyphasor!r}", lines=lines)
+        except KeyphasorError as exc:
+            raise WaveformError(str(exc)) from None
+        # fewer than 8 samples a turn: the pulse edges (and the 1X) are aliased
+        per_turn = float(np.min(np.diff(edges))) / dt
+        if per_turn < 8:
+            raise WaveformError(f"{path}: only {per_turn:.1f} samples per revolution at the top speed: sample faster")
+        inside, phi, speed, accel = spin_from_pulses(t, edges)
+    else:
+        speed_all = data[:, col[rig.speed]] * SPEED_UNITS[rig.speed_unit]
+        inside = np.ones(len(t), dtype=bool)
+        phi = np.concatenate(([0.0], np.cumsum(0.5 * (speed_all[1:] + speed_all[:-1]) * step)))
+        speed = speed_all
+        accel = np.gradient(speed_all, t)
+    readings = {}
+    for p in rig.probes:
+        x = data[inside, col[p.name]]
+        readings[p.name] = x if rig.displacement not in ("V", "mV") else rig.to_metres(x) / 1e-6
+    r_rig = rig if rig.displacement not in ("V", "mV") else replace(rig, displacement="um",
+                                                                   sensitivity_mv_per_um=None)
+    u, v = to_model_axes(r_rig, readings)
+    rec = RigRecord(r_rig, t[inside], phi, speed, accel, readings, u, v, str(path))
+    if rig.slow_roll_rpm is not None:
+        rec = rec.compensate_runout(below_rpm=rig.slow_roll_rpm)
+    return rec
