@@ -29,12 +29,9 @@ class _UsageError(Exception):
 
 def _parse_number(text: str, what: str) -> float:
     try:
-        value = float(text)
+        return float(text)
     except ValueError:
         raise _UsageError(f"{what}: {text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise _UsageError(f"{what}: {text!r} is not a finite number")
-    return value
 
 
 def _ip_value(text: str) -> float:
