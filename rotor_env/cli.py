@@ -134,6 +134,10 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             crack = _parse_crack(args.crack)
         ip = values.pop("ip", 0.3)
         params = RotorParams(ip=ip, values=values, crack=crack)
+        if args.rig or args.vectors:
+            if not args.rig:
+                raise _UsageError("--vectors needs --rig RIG.yaml (the probes to track)")
+            return _simulate_rig(args, params, out)
         run_up = RunUp(rate=args.run_up)
         if args.noise is not None and not (math.isfinite(args.noise) and args.noise >= 0):
             raise _UsageError(f"--noise must be a finite number >= 0, got {args.noise!r}")
@@ -198,6 +202,17 @@ def _add_simulate_parser(sub) -> None:
     p.add_argument("--seed", type=int, help="seed of the noise (reproducible)")
     p.add_argument("--crack", metavar="T:D", help="a crack at time T: the asymmetry D jumps to D")
     p.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
+    g = p.add_argument_group("rig recordings (engineering units)")
+    g.add_argument("--rig", metavar="RIG.yaml", help="write what this rig records: time in s, keyphasor, probes "
+                   "(--noise is then in the rig's displacement unit)")
+    g.add_argument("--vectors", action="store_true", help="with --rig: write the order-tracked 1X/2X table instead")
+    g.add_argument("--natural-rpm", type=float, default=1650.0, help="natural frequency in rpm (default 1650)")
+    g.add_argument("--rpm", default="300:3000", metavar="FROM:TO", help="speed range (default 300:3000; "
+                   "3000:300 is a coast-down)")
+    g.add_argument("--rpm-per-s", type=float, default=230.0, help="sweep rate (default 230 rpm/s)")
+    g.add_argument("--sample-rate", type=float, default=5000.0, help="samples per second (default 5000)")
+    g.add_argument("--runout", metavar="AMP[:PHASE]", help="probe-track runout: 1X amplitude (rig unit) and phase "
+                   "(degrees)")
     p.set_defaults(func=_cmd_simulate)
 
 
@@ -279,11 +294,14 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         if not parent.is_dir():
             raise _UsageError(f"--figures {figs}: folder {parent} does not exist")
         check_writable(parent / ".rotor-id-probe", overwrite=True)
-    meas, user = _load(args)
-    model = _model_list(args.model, DEFAULT_MODEL)
-    candidates = [c for c in (*LIBRARY_CANDIDATES, *user) if c not in model]
-    result = diagnose(meas, model, candidates=candidates, ip=args.ip, alpha=args.alpha, slow_roll=args.slow_roll,
-                      progress=sys.stderr.isatty() and not args.json)
+    if args.vectors or args.rig:
+        result = _diagnose_measured(args)
+    else:
+        meas, user = _load(args)
+        model = _model_list(args.model, DEFAULT_MODEL)
+        candidates = [c for c in (*LIBRARY_CANDIDATES, *user) if c not in model]
+        result = diagnose(meas, model, candidates=candidates, ip=args.ip, alpha=args.alpha, slow_roll=args.slow_roll,
+                          progress=sys.stderr.isatty() and not args.json)
     if args.figures:
         result.save_figures(args.figures)
     if args.report:
@@ -297,6 +315,97 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         if args.report:
             print(f"report written to {args.report}")
     return 0
+
+
+def _diagnose_measured(args: argparse.Namespace):
+    """``diagnose --vectors`` (an order-tracked table) or ``diagnose --rig`` (raw waveforms)."""
+    from .diagnosis.from_rig import diagnose_rig
+    from .diagnosis.from_vectors import VECTOR_CANDIDATES, VECTOR_MODEL, diagnose_vectors
+    from .diagnosis.model import DEFAULT_MODEL
+    from .measurements.rig import load_rig
+    from .measurements.vectors import load_vector_table
+    from .measurements.waveforms import load_waveforms
+
+    rig = load_rig(args.rig) if args.rig else None
+    if args.effect:
+        raise _UsageError("--effect (a user effect) works on dimensionless files, not yet with --vectors/--rig")
+    if args.vectors:
+        angles = {p.name: math.degrees(p.angle) for p in rig.probes} if rig is not None else None
+        table = load_vector_table(args.file, amp_unit=args.amp_unit, phase=args.phase, angles=angles)
+        model = _model_list(args.model, VECTOR_MODEL) if args.model else list(VECTOR_MODEL)
+        ip = rig.ip if rig is not None else (args.ip if args.ip is not None else 0.0)
+        return diagnose_vectors(table, ip=ip, model=model, alpha=args.alpha, phase=args.phase,
+                                candidates=[c for c in VECTOR_CANDIDATES if c not in model])
+    record = load_waveforms(args.file, rig)
+    model = _model_list(args.model, DEFAULT_MODEL)
+    return diagnose_rig(record, model, alpha=args.alpha, progress=sys.stderr.isatty() and not args.json)
+
+
+def _simulate_rig(args: argparse.Namespace, params, out) -> int:
+    """``simulate --rig``: waveforms (keyphasor, probes) or, with ``--vectors``, the 1X/2X table."""
+    import numpy as np
+
+    from .effects import EFFECTS
+    from .measurements.rig import load_rig
+    from .measurements.simulated import simulate_rig
+    from .outputs import atomic_write
+    from .params import RotorParams
+
+    rig = load_rig(args.rig)
+    # a rig run is a healthy rotor (stiffness, damping, unbalance) plus the effects whose
+    # parameters --set / --params / --crack name: not the paper's crack-and-friction rotor
+    named = set(params.values) if hasattr(params, "values") else set()
+    given = {k for k in (_parse_set(args.set or []) | (_load_params_file(args.params) if args.params else {}))}
+    effects = ["stiffness", "viscous_damping", "unbalance"]
+    effects += [n for n, e in EFFECTS.items() if n not in effects and n != "unbalance_in_phase"
+                and any(pn in given for pn in e.parameter_names)]
+    if params.crack is not None and "asymmetry" not in effects:
+        effects.append("asymmetry")
+    del named
+    params = RotorParams(ip=0.0 if rig.model == "translation" else params.ip,
+                         values={k: v for k, v in params.values.items()
+                                 if any(k in EFFECTS[e].parameter_names for e in effects)},
+                         effects=tuple(effects), crack=params.crack)
+    rpm_from, rpm_to = _parse_range(args.rpm)
+    runout, runout_phase = (0.0, 0.0)
+    if args.runout:
+        parts = args.runout.split(":")
+        runout = _parse_number(parts[0], "--runout amplitude")
+        runout_phase = _parse_number(parts[1], "--runout phase") if len(parts) > 1 else 0.0
+    run = simulate_rig(rig, params, natural_rpm=args.natural_rpm, rpm_from=rpm_from, rpm_to=rpm_to,
+                       rpm_per_s=math.copysign(abs(args.rpm_per_s), rpm_to - rpm_from),
+                       sample_rate=args.sample_rate, noise=args.noise or 0.0, runout=runout,
+                       runout_phase_deg=runout_phase, seed=args.seed)
+    if args.vectors:
+        table = run.vectors(rig)
+        table.to_csv(out, phase="lag", overwrite=args.force)
+        print(f"wrote {len(table.speed)} revolutions of 1X/2X vectors (amplitude in {rig.amp_unit}, phase lag in "
+              f"degrees) to {out}")
+        return 0
+    cols = run.file_columns()
+    names = list(cols)
+    data = np.column_stack([cols[n] for n in names])
+
+    def write(tmp) -> None:
+        if str(out).lower().endswith(".parquet"):
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+
+            pq.write_table(pa.table({n: data[:, j] for j, n in enumerate(names)}), tmp)
+        else:
+            np.savetxt(tmp, data, delimiter=",", header=",".join(names), comments="", fmt="%.10g")
+
+    atomic_write(out, write, overwrite=args.force)
+    print(f"wrote {len(data)} samples ({data[-1, 0]:.3f} s at {args.sample_rate:g} Hz, {rpm_from:g} to {rpm_to:g} "
+          f"rpm, natural frequency {args.natural_rpm:g} rpm) to {out}")
+    return 0
+
+
+def _parse_range(text: str) -> tuple[float, float]:
+    parts = text.split(":")
+    if len(parts) != 2:
+        raise _UsageError(f"--rpm {text!r}: expected FROM:TO (e.g. 300:3000; 3000:300 for a coast-down)")
+    return _parse_number(parts[0], "--rpm FROM"), _parse_number(parts[1], "--rpm TO")
 
 
 def _cmd_fit(args: argparse.Namespace) -> int:
@@ -391,6 +500,16 @@ def _add_diagnose_parsers(sub) -> None:
             p.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
             p.add_argument("--figures", metavar="DIR", help="write the figures (PNG) to this folder")
             p.add_argument("--force", action="store_true", help="overwrite --report / --figures")
+            g = p.add_argument_group("measured rig data")
+            g.add_argument("--rig", metavar="RIG.yaml", help="FILE holds raw waveforms (time in s, keyphasor, probes) "
+                           "described by this rig file (docs/MEASUREMENTS.md)")
+            g.add_argument("--vectors", action="store_true", help="FILE is an order-tracked table: rpm, amp, "
+                           "phase_deg (or NAME_amp, NAME_phase_deg per probe), optional t")
+            g.add_argument("--amp-unit", default="um", choices=("um", "mil", "mm", "m"),
+                           help="amplitude unit of the table (default um)")
+            g.add_argument("--phase", default="lag", choices=("lag", "lead"),
+                           help="phase convention: lag = instrument x = A cos(phi - phase) (default), "
+                                "lead = angle of X with x = Re(X e^{i phi})")
             p.set_defaults(func=_cmd_diagnose)
         else:
             p.set_defaults(func=_cmd_fit)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..measurements.rig import SPEED_UNITS
 from ..measurements.waveforms import LENGTH_UNIT, RigRecord
@@ -28,6 +28,9 @@ from .synchronous import RUNOUT
 from .workflow import diagnose
 
 __all__ = ["RigDiagnosis", "diagnose_rig"]
+
+#: slow roll: revolutions below this fraction of the first critical
+SLOW_ROLL_FRACTION = 0.3
 
 
 @dataclass
@@ -110,8 +113,21 @@ def diagnose_rig(
     """Diagnose a rig recording (see the module docstring)."""
     ip = record.rig.ip
     vd = diagnose_vectors(record.vectors((1,)), ip=ip, alpha=alpha)
-    if RUNOUT in vd.missing and vd.after.runout is not None:
-        record = record.compensate_runout(runout=dict(zip(vd.table.probes, vd.after.runout, strict=True)))
+    if RUNOUT in vd.missing and record.rig.slow_roll_rpm is None:
+        # runout seen in the 1X vectors: compensate it as field engineers do, from the
+        # slow-roll revolutions (well below the critical, where the unbalance response is
+        # a few per cent of the eccentricity) -- not from the 1X fit, which an effect the
+        # 1X model cannot carry (a crack, a rub) would bias
+        crit = vd.to_dict()["criticals"]
+        below = SLOW_ROLL_FRACTION * (crit[0]["rpm"] if crit else vd.after.w_ref / SPEED_UNITS["rpm"])
+        if (record.rpm < below).sum() > 0 and float(record.rpm.min()) < below:
+            try:
+                record = record.compensate_runout(below_rpm=below)
+            except ValueError as exc:
+                record = replace(record, notes=(*record.notes, f"runout not compensated: {exc}"))
+        else:
+            record = replace(record, notes=(*record.notes, f"runout seen in the 1X vectors, but the run has no "
+                                                          f"slow roll below {below:.0f} rpm to take it from"))
     w_ref = vd.after.w_ref
     meas = record.to_measurements(w_ref)
     cands = [c for c in (candidates if candidates is not None else LIBRARY_CANDIDATES) if c not in model]

@@ -190,6 +190,119 @@ class VectorDiagnosis:
         return self.table.rpm, meas, models
 
 
+    def plot_bode(self, ax=None):
+        """Bode plot: measured 1X vectors and the start and final models, per probe."""
+        from .field_plots import plot_bode
+
+        rpm, meas, models = self.bode_data()
+        return plot_bode(rpm, meas, models, speed_unit="rpm", amp_unit=_unit_label(self.table.amp_unit),
+                         phase=self.phase, ax=ax)
+
+    def plot_polar(self, ax=None):
+        """Polar plot of the same vectors."""
+        from .field_plots import plot_polar
+
+        rpm, meas, models = self.bode_data()
+        return plot_polar(rpm, meas, models, speed_unit="rpm", amp_unit=_unit_label(self.table.amp_unit),
+                          phase=self.phase, ax=ax)
+
+    def plot_residual(self, ax=None):
+        """|measured - model| against speed, before and after, with the noise floor."""
+        import matplotlib.pyplot as plt
+
+        fig, ax = (plt.subplots(figsize=(8, 3.5)) if ax is None else (ax.figure, ax))
+        rpm = self.table.rpm
+        for fit, label in ((self.before, "start model"), (self.after, "final model")):
+            mag = np.sqrt(np.nanmean(np.abs(fit.residual) ** 2, axis=1))
+            ax.plot(rpm, mag, lw=1, label=f"{label} ({', '.join(fit.model.names)})")
+        ax.axhline(self.noise_floor, color="k", ls="--", lw=0.8, label="noise floor")
+        ax.axhline(FLOOR_RATIO * self.noise_floor, color="k", ls=":", lw=0.8, label=f"{FLOOR_RATIO}x floor")
+        for c in self.after.criticals:
+            ax.axvline(c["rpm"], color="0.6", lw=0.8)
+        ax.set_xlabel("speed [rpm]")
+        ax.set_ylabel(f"1X residual RMS [{_unit_label(self.table.amp_unit)}]")
+        ax.set_title("where the model fails: 1X residual against speed (grey: criticals)")
+        ax.legend(fontsize=8)
+        return fig
+
+    def plot_campbell(self, ax=None):
+        """Whirl frequencies of the final model against speed, the 1x line and the criticals."""
+        from .field_plots import plot_campbell
+        from .synchronous import _modes
+
+        rpm = np.linspace(0.0, float(self.table.rpm.max()) * 1.1, 120)
+        coef = self.after.coef()
+        w_ref = self.after.w_ref
+        branches: dict[str, list[float]] = {"forward whirl": [], "backward whirl": []}
+        for r in rpm:
+            lam, share = _modes(self.after.model, coef, r * SPEED_UNITS["rpm"] / w_ref)
+            hz = np.abs(lam.imag) * w_ref / (2 * math.pi)
+            branches["forward whirl"].append(float(hz[share >= 0.5].min()) if (share >= 0.5).any() else np.nan)
+            # backward whirl frequencies are negative (the plot's convention)
+            branches["backward whirl"].append(-float(hz[share < 0.5].min()) if (share < 0.5).any() else np.nan)
+        return plot_campbell(rpm, {k: np.array(v) for k, v in branches.items()}, speed_unit="rpm", ax=ax)
+
+    def figures(self) -> dict[str, object]:
+        out = {"bode": self.plot_bode(), "polar": self.plot_polar(), "residual": self.plot_residual()}
+        try:
+            out["campbell"] = self.plot_campbell()
+        except (ValueError, TypeError):  # a plot helper's contract changed: the report goes on without it
+            pass
+        return out
+
+    def save_figures(self, folder, *, overwrite: bool = True) -> list:
+        """Every figure as ``folder/<name>.png``."""
+        from pathlib import Path
+
+        import matplotlib.pyplot as plt
+
+        from ..outputs import atomic_write
+
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        paths = []
+        for name, fig in self.figures().items():
+            paths.append(atomic_write(folder / f"{name}.png",
+                                      lambda p, fig=fig: fig.savefig(p, format="png", dpi=110, bbox_inches="tight"),
+                                      overwrite=overwrite))
+            plt.close(fig)
+        return paths
+
+    def report(self, path, *, overwrite: bool = False):
+        """A self-contained HTML report: verdict, criticals, Bode, polar, residual, Campbell."""
+        import base64
+        import html
+        import io
+
+        import matplotlib.pyplot as plt
+
+        from ..outputs import atomic_write_text, check_writable
+
+        path = check_writable(path, overwrite=overwrite)
+        imgs = []
+        for name, fig in self.figures().items():
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+            plt.close(fig)
+            imgs.append(f'<h2>{html.escape(name)}</h2><img alt="{html.escape(name)}" style="max-width:100%" '
+                        f'src="data:image/png;base64,{base64.b64encode(buf.getvalue()).decode()}">')
+        d = self.to_dict()
+        crit = "".join(f"<tr><td>{c['rpm']:.1f}</td><td>{c['damping_ratio']:.4f}</td></tr>" for c in d["criticals"])
+        doc = (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>rotor-id: 1X vectors</title>"
+               f"<style>body{{font-family:sans-serif;max-width:1000px;margin:auto}}td,th{{border:1px solid #bbb;"
+               f"padding:3px 8px}}table{{border-collapse:collapse}}</style></head><body>"
+               f"<h1>rotor-id diagnosis of order-tracked vectors</h1>"
+               f"<section class='verdict verdict-{html.escape(self.verdict)}'><p><b>Verdict: "
+               f"{html.escape(self.verdict)}</b></p><pre>{html.escape(self.summary())}</pre></section>"
+               f"<h2>Critical speeds</h2><table><tr><th>rpm</th><th>damping ratio</th></tr>{crit}</table>"
+               + "".join(imgs) + "</body></html>")
+        return atomic_write_text(path, doc, overwrite=overwrite)
+
+
+def _unit_label(unit: str) -> str:
+    return "µm" if unit == "um" else unit
+
+
 def _cause(name: str) -> str:
     if name == RUNOUT:
         return "probe runout: a constant 1X vector (mechanical/electrical runout of the probe track), seen at slow roll"
@@ -233,6 +346,11 @@ def diagnose_vectors(
     current, missing, tested, rejected = before, [], [], []
     log10_alpha = min(math.log10(alpha), LOG10_P_MAX)
     remaining = [c for c in candidates if c not in current.model.names]
+    if table.angles is None and len(table.probes) > 1:
+        skip = [c for c in remaining if c != RUNOUT and get_effect(c).name in ("support_anisotropy",)]
+        if skip:
+            notes.append(f"probe angles unknown (no rig description): {', '.join(skip)} not tested; give --rig")
+            remaining = [c for c in remaining if c not in skip]
     while remaining and len(missing) < max_added:
         if current.rms <= FLOOR_RATIO * floor:
             break
@@ -270,6 +388,9 @@ def diagnose_vectors(
         remaining = [c for c in remaining if c != best[0]]
         # an effect rejected earlier may be accepted once another is in: keep only the last reasons
         rejected = [r for r in rejected if r["effect"] in remaining]
+    if current.rms > FLOOR_RATIO * floor:
+        notes.append("what is left may act in the rotating frame (a crack: asymmetry, breathing) or be non-linear "
+                     "(a rub, dry friction): the 1X vectors cannot carry those; diagnose the waveforms (--rig)")
     amp, _ = to_phase(table.vectors[1], phase)
     if floor > 0 and np.nanmax(amp) < 3 * floor:
         notes.append("the 1X amplitude hardly rises above the noise: the critical is not excited in this run")

@@ -390,9 +390,30 @@ class _Problem:
             probes = np.concatenate([probes, R], axis=2)
         return probes
 
+    def expand(self, B: np.ndarray) -> np.ndarray:
+        """Without the probes' angles each probe sees the whirl from its own unknown angle:
+        its own copy of the forcing coefficients (an isotropic rotor's response is
+        ``W e^{-i angle}``: the angle is absorbed into the complex unbalance)."""
+        n_f = len(self.basis)
+        n_p = len(self.table.probes)
+        if self.table.angles is not None or n_p == 1 or n_f == 0:
+            return B
+        blocks = []
+        for p in range(n_p):
+            blk = np.zeros_like(B[..., :n_f])
+            blk[:, p, :] = B[:, p, :n_f]
+            blocks.append(blk)
+        return np.concatenate([*blocks, B[..., n_f:]], axis=2)
+
+    @property
+    def n_forcing(self) -> int:
+        n_p = len(self.table.probes)
+        return len(self.basis) * (n_p if self.table.angles is None and n_p > 1 else 1)
+
     def solve_linear(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Real forcing coefficients and complex runouts: least squares on the valid entries."""
-        n_f = len(self.basis)
+        B = self.expand(B)
+        n_f = self.n_forcing
         n_p = B.shape[2] - n_f
         v = self.valid
         # real unknowns: n_f forcing coefficients, then (Re, Im) of each runout
@@ -514,7 +535,8 @@ def _nonzero_start(effect: str) -> float:
 
 
 def _predict(prob: _Problem, B: np.ndarray, sol: np.ndarray) -> np.ndarray:
-    n_f = len(prob.basis)
+    B = prob.expand(B)
+    n_f = prob.n_forcing
     pred = np.einsum("rpn,n->rp", B[..., :n_f], sol[:n_f]) if n_f else np.zeros(B.shape[:2], dtype=complex)
     for j in range(B.shape[2] - n_f):
         pred = pred + B[..., n_f + j] * (sol[n_f + 2 * j] + 1j * sol[n_f + 2 * j + 1])
@@ -526,16 +548,19 @@ def _finish(prob: _Problem, x: np.ndarray, success: bool) -> VectorFit:
     sol, _ = prob.solve_linear(B)
     pred = _predict(prob, B, sol)
     w_ref, st = prob.unpack(x)
-    n_f = len(prob.basis)
+    n_f = prob.n_forcing
     forcing: dict[str, np.ndarray] = {}
-    for (e, q), v in zip(prob.basis, sol[:n_f], strict=True):
+    # the first probe's copy when each probe has its own (no angles): its size is what is reported
+    for (e, q), v in zip(prob.basis, sol[: len(prob.basis)], strict=True):
         forcing.setdefault(e, np.zeros(len(get_effect(e).coefficients)))[q] = v
     runout = None
     if prob.model.runout:
         runout = sol[n_f::2] + 1j * sol[n_f + 1 :: 2]
     # Jacobian of the whole residual w.r.t. all parameters (nonlinear and linear), for the HAC tests
     names = ["log_w_ref"] + [f"{e}[{q}]" for e, n in prob.struct_sizes for q in range(n)]
-    names += [f"{e}[{q}]" for e, q in prob.basis]
+    copies = prob.n_forcing // max(len(prob.basis), 1)
+    names += [f"{e}[{q}]" + (f"@{p}" if copies > 1 else "") for p in prob.table.probes[:copies]
+              for e, q in prob.basis]
     if runout is not None:
         names += [f"{RUNOUT}[{p}].{c}" for p in prob.table.probes for c in ("re", "im")]
     theta = np.concatenate([x, sol])
