@@ -569,6 +569,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (_UsageError, ValueError, OSError) as exc:
         print(f"rotor-id {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"rotor-id {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -35,7 +35,8 @@ from ..measurements.vectors import SPEED_UNITS, VectorTable, to_phase
 from .synchronous import RUNOUT, SynchronousModel, VectorFit, fit_vectors
 from .verdict import FLOOR_RATIO, verdict_of
 
-__all__ = ["VECTOR_CANDIDATES", "VECTOR_MODEL", "VectorDiagnosis", "diagnose_vectors", "vector_noise_floor"]
+__all__ = ["VECTOR_CANDIDATES", "VECTOR_MODEL", "VectorDiagnosis", "check_whirl_direction", "diagnose_vectors",
+           "vector_noise_floor"]
 
 VECTOR_MODEL: tuple[str, ...] = ("viscous_damping", "unbalance")
 VECTOR_CANDIDATES: tuple[str, ...] = ("shaft_bow", RUNOUT, "support_anisotropy", "cross_coupled_stiffness")
@@ -53,6 +54,42 @@ def vector_noise_floor(table: VectorTable) -> float:
     if p2.size == 0:
         return float("nan")
     return float(math.sqrt(np.median(p2) / (6.0 * math.log(2.0))))
+
+
+#: share of the speeds (with a clear 1X) at which a backward 1X whirl means wrong probe angles
+BACKWARD_SHARE = 0.7
+
+
+def check_whirl_direction(table: VectorTable, floor: float) -> None:
+    """Refuse probe angles (or a rotation direction) under which the 1X whirl turns backward.
+
+    An unbalance drives a forward whirl; a support anisotropy turns it backward only
+    between its two criticals.  With the probes' angles the 1X orbit's forward and
+    backward parts are ``(Q_u + i Q_v) / 2`` and ``(conj Q_u + i conj Q_v) / 2``; when the
+    backward part dominates at most speeds the angles are swapped or mirrored.
+    """
+    if table.angles is None or len(table.probes) < 2:
+        return
+    from ..measurements.vectors import VectorTableError
+    from .synchronous import _probe_matrix
+
+    P = _probe_matrix(table)
+    Y = table.vectors[1]
+    ok = np.isfinite(Y).all(axis=1)
+    Q = np.linalg.lstsq(P, Y[ok].T, rcond=None)[0]  # (2, rows): Q_u, Q_v
+    fwd = np.abs(Q[0] + 1j * Q[1]) / 2
+    bwd = np.abs(np.conj(Q[0]) + 1j * np.conj(Q[1])) / 2
+    clear = (fwd + bwd) > 3 * max(floor, 1e-300)
+    if clear.sum() < 5:
+        return
+    share = float(np.mean(bwd[clear] > fwd[clear]))
+    if share > BACKWARD_SHARE:
+        deg = ", ".join(f"{p} {math.degrees(a):g}" for p, a in zip(table.probes, table.angles, strict=True))
+        raise VectorTableError(
+            f"{table.source}: with the probes' mounting angles ({deg} deg) the 1X whirl turns backward at "
+            f"{100 * share:.0f} % of the speeds, where an unbalance drives a forward whirl: the angles (rig key "
+            "'probes') are swapped or mirrored, or measured against the rotation; angles are counted from the "
+            "reference in the direction of rotation")
 
 
 def _time_major(fit: VectorFit) -> tuple[np.ndarray, np.ndarray, int]:
@@ -333,6 +370,7 @@ def diagnose_vectors(
     phase: str = "lag",
 ) -> VectorDiagnosis:
     """Fit ``model`` to the table's 1X vectors and add the missing effects one by one."""
+    check_whirl_direction(table, vector_noise_floor(table))
     base_effects = tuple(e for e in model if e != RUNOUT)
     start_model = SynchronousModel(base_effects, ip=ip, runout=RUNOUT in model)
     before = fit_vectors(table, start_model, method=method)

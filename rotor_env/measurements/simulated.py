@@ -92,7 +92,16 @@ def simulate_rig(
     dt = 1.0 / sample_rate * w_ref
     a = rpm_per_s * SPEED_UNITS["rpm"] / w_ref**2
     s0 = rpm_from * SPEED_UNITS["rpm"] / w_ref
-    meas = Simulator(params).run(t_end=n * dt, dt=dt, run_up=RunUp(rate=a, speed0=s0))
+    sim = Simulator(params)
+    # a machine runs at the first speed before the sweep starts: settle there first (ten
+    # decay times of the damping), so the record holds no start-from-rest transient
+    c = float(params.values.get("c", 0.03)) if "viscous_damping" in params.effects else 0.03
+    settle = min(4000.0, 20.0 / max(c, 0.005))
+    pre = sim.run(t_end=settle, dt=min(0.05, settle / 10), run_up=RunUp(rate=0.0, speed0=s0))
+    last = pre.data[-1]
+    initial = (last[4], last[5], last[6], last[7])
+    meas = sim.run(t_end=n * dt, dt=dt, run_up=RunUp(rate=a, speed0=s0, phi0=float(last[1]) % (2 * math.pi)),
+                   initial=initial)
     t = meas.t / w_ref
     phi = meas.phi
     u = meas.theta_y * LENGTH_UNIT
