@@ -133,11 +133,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         if args.crack is not None:
             crack = _parse_crack(args.crack)
         ip = values.pop("ip", 0.3)
-        params = RotorParams(ip=ip, values=values, crack=crack)
         if args.rig or args.vectors:
             if not args.rig:
                 raise _UsageError("--vectors needs --rig RIG.yaml (the probes to track)")
-            return _simulate_rig(args, params, out)
+            return _simulate_rig(args, values, ip, crack, out)
+        params = RotorParams(ip=ip, values=values, crack=crack)
         run_up = RunUp(rate=args.run_up)
         if args.noise is not None and not (math.isfinite(args.noise) and args.noise >= 0):
             raise _UsageError(f"--noise must be a finite number >= 0, got {args.noise!r}")
@@ -341,7 +341,7 @@ def _diagnose_measured(args: argparse.Namespace):
     return diagnose_rig(record, model, alpha=args.alpha, progress=sys.stderr.isatty() and not args.json)
 
 
-def _simulate_rig(args: argparse.Namespace, params, out) -> int:
+def _simulate_rig(args: argparse.Namespace, values: dict, ip: float, crack, out) -> int:
     """``simulate --rig``: waveforms (keyphasor, probes) or, with ``--vectors``, the 1X/2X table."""
     import numpy as np
 
@@ -354,18 +354,16 @@ def _simulate_rig(args: argparse.Namespace, params, out) -> int:
     rig = load_rig(args.rig)
     # a rig run is a healthy rotor (stiffness, damping, unbalance) plus the effects whose
     # parameters --set / --params / --crack name: not the paper's crack-and-friction rotor
-    named = set(params.values) if hasattr(params, "values") else set()
-    given = {k for k in (_parse_set(args.set or []) | (_load_params_file(args.params) if args.params else {}))}
     effects = ["stiffness", "viscous_damping", "unbalance"]
     effects += [n for n, e in EFFECTS.items() if n not in effects and n != "unbalance_in_phase"
-                and any(pn in given for pn in e.parameter_names)]
-    if params.crack is not None and "asymmetry" not in effects:
+                and any(pn in values for pn in e.parameter_names)]
+    if crack is not None and "asymmetry" not in effects:
         effects.append("asymmetry")
-    del named
-    params = RotorParams(ip=0.0 if rig.model == "translation" else params.ip,
-                         values={k: v for k, v in params.values.items()
-                                 if any(k in EFFECTS[e].parameter_names for e in effects)},
-                         effects=tuple(effects), crack=params.crack)
+    unknown = [k for k in values if not any(k in EFFECTS[e].parameter_names for e in effects)]
+    if unknown:
+        raise _UsageError(f"unknown parameter(s) {unknown}")
+    params = RotorParams(ip=0.0 if rig.model == "translation" else ip, values=values, effects=tuple(effects),
+                         crack=crack)
     rpm_from, rpm_to = _parse_range(args.rpm)
     runout, runout_phase = (0.0, 0.0)
     if args.runout:

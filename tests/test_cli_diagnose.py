@@ -195,8 +195,9 @@ def test_report_and_figures_written(asym_file, tmp_path, capsys):
     html = report.read_text()
     assert html.startswith("<!DOCTYPE html>") and "asymmetry" in html
     pngs = sorted(p.name for p in figs.glob("*.png"))
-    assert pngs == sorted(f"{n}.png" for n in ("compare", "residual", "order_map", "autocorrelation",
-                                               "candidates", "before_after"))
+    from rotor_env.diagnosis import Diagnosis
+
+    assert pngs == sorted(f"{n}.png" for n in Diagnosis.FIGURES)
     for p in figs.glob("*.png"):
         data = p.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000

@@ -388,9 +388,11 @@ def test_plots_return_figures_and_accept_ax(method):
 def test_figures_and_report(tmp_path):
     _, res = _hidden_run("asymmetry")
     paths = res.save_figures(tmp_path / "figs")
-    assert sorted(p.name for p in paths) == sorted(f"{n}.png" for n in
-                                                   ("compare", "residual", "order_map", "autocorrelation",
-                                                    "candidates", "before_after"))
+    # every figure the report shows (the diagnosis's own six and the field's plots: Bode, polar,
+    # orbits, waterfall, Campbell, parameter tracks, the final residual)
+    assert sorted(p.name for p in paths) == sorted(f"{n}.png" for n in res.FIGURES)
+    assert {"compare", "residual", "order_map", "autocorrelation", "candidates", "before_after", "bode", "polar",
+            "orbit", "waterfall", "campbell", "parameter_tracks"} <= set(res.FIGURES)
     for p in paths:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     open_figures = len(plt.get_fignums())
