@@ -276,6 +276,46 @@ def test_a_table_without_time_is_fitted_quasi_steady(rig):
     assert _closest(out["criticals"], 1650)["damping_ratio"] == pytest.approx(0.02, rel=0.05)
 
 
+def test_two_plane_rig_gives_the_tilt_and_the_gyroscopic_critical(tmp_path):
+    """Two probe planes either side of the disk: the tilt (urad), the forward critical
+    raised by the gyroscopic stiffening to w_n / sqrt(1 - ip)."""
+    from rotor_env.measurements.waveforms import load_waveforms
+
+    path = tmp_path / "tilt.json"
+    path.write_text(json.dumps({
+        "keyphasor": "kp",
+        "probes": [{"name": "xa", "angle_deg": 45, "plane": "A"}, {"name": "ya", "angle_deg": -45, "plane": "A"},
+                   {"name": "xb", "angle_deg": 45, "plane": "B"}, {"name": "yb", "angle_deg": -45, "plane": "B"}],
+        "planes": {"A": {"axial_position_m": -0.1}, "B": {"axial_position_m": 0.15}},
+        "disk": {"polar_inertia_kg_m2": 0.03, "diametral_inertia_kg_m2": 0.1}}))
+    rig = load_rig(path)
+    params = RotorParams(ip=0.3, values={"c": 0.04, "tau": 0.002, "beta": 0.3},
+                         effects=("stiffness", "viscous_damping", "unbalance"))
+    run = simulate_rig(rig, params, noise=0.2, seed=3, sample_rate=3000, rpm_from=400, rpm_to=3200, rpm_per_s=300)
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    pq.write_table(pa.table(run.file_columns()), tmp_path / "tilt.parquet")
+    record = load_waveforms(tmp_path / "tilt.parquet", rig)
+    table = record.vectors((1,))
+    assert table.amp_unit == "urad" and table.probes == ("tilt_u", "tilt_v")
+    out = diagnose_vectors(table, ip=rig.ip).to_dict()
+    # independent reference: the complex scalar equation z'' + (c - i ip W) z' + z = 0, its
+    # forward root lambda(W) (numpy.roots) and the speed where Im lambda = W (scipy.brentq)
+    from scipy.optimize import brentq
+
+    def forward(w):
+        roots = np.roots([1.0, 0.04 - 0.3j * w, 1.0])
+        return roots[np.argmax(roots.imag)]
+
+    w_c = brentq(lambda w: forward(w).imag - w, 0.5, 2.0)
+    lam = forward(w_c)
+    crit = _closest(out["criticals"], 1972)
+    assert crit["rpm"] == pytest.approx(1650 * w_c, rel=0.01)
+    assert crit["damping_ratio"] == pytest.approx(-lam.real / abs(lam), rel=0.05)
+    assert out["verdict"] == "explained"
+
+
 # ------------------------------------------------------------------ the command line
 def _cli(*args, cwd):
     return subprocess.run([sys.executable, "-m", "rotor_env.cli", *args], cwd=cwd, capture_output=True, text=True,

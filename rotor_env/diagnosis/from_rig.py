@@ -61,6 +61,7 @@ class RigDiagnosis:
                 d[f"{key}_dimensionless"] = d[key]
                 d[key] = d[key] * s
         vd = self.vectors.to_dict()
+        vd["unbalance"] = self.vectors.unbalance(self.record.rig.mass_kg)
         d.update({
             "kind": "rig",
             "rig": self.record.rig.source,
@@ -70,7 +71,7 @@ class RigDiagnosis:
             "natural_frequency_rpm": self.w_ref / SPEED_UNITS["rpm"],
             "time_unit_s": 1.0 / self.w_ref,
             "vectors": {k: vd[k] for k in ("missing", "verdict", "rms_before", "rms_after", "noise_floor",
-                                           "amplitude_unit", "method", "physical")},
+                                           "amplitude_unit", "method", "physical", "unbalance")},
             "notes": [*d.get("notes", []), *self.record.notes],
         })
         return d
@@ -92,6 +93,15 @@ class RigDiagnosis:
         return "\n".join(lines)
 
     def report(self, path, *, overwrite: bool = False):
+        """The waveform diagnosis's report (in s and rpm), with the 1X vectors' section first."""
+        import html
+
+        head = (f"<h2>Rig recording</h2><p>{html.escape(str(self.record.source))}: {self.record.rig.model} model, "
+                f"{self.record.rpm.min():.0f}&ndash;{self.record.rpm.max():.0f} rpm; the model's time unit "
+                f"1/{self.w_ref:.6g} s (natural frequency {self.w_ref / SPEED_UNITS['rpm']:.1f} rpm).</p>"
+                + self.vectors.html_section(level=3) + "<h2>Waveforms</h2>")
+        if hasattr(self.diagnosis, "_verdict_html"):
+            return self.diagnosis.report(path, overwrite=overwrite, preamble=head)
         return self.diagnosis.report(path, overwrite=overwrite)
 
     def save_figures(self, folder, *, overwrite: bool = True):
@@ -134,4 +144,9 @@ def diagnose_rig(
     result = diagnose(meas, list(model), candidates=cands, ip=ip, alpha=alpha, progress=progress)
     if not math.isfinite(w_ref):  # pragma: no cover - fit_vectors returns finite values
         raise RuntimeError("no natural frequency identified")
+    if hasattr(result, "time_scale"):
+        # the figures in s and rpm: t_model = time_scale * t_file, the file's time in s
+        result.time_scale = float(result.time_scale) * w_ref
+        result.time_unit = "s"
+        result.amplitude_unit = "mm" if record.rig.model == "translation" else "rad"
     return RigDiagnosis(record, vd, result, w_ref)

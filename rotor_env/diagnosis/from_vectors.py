@@ -46,14 +46,33 @@ MIN_GAIN = 0.10
 LOG10_P_MAX = -3.0
 
 
-def vector_noise_floor(table: VectorTable) -> float:
-    """RMS of the noise per complex vector, from the rows' second differences (see module doc)."""
+def vector_noise_floor(table: VectorTable, bands: int = 8) -> float:
+    """RMS of the noise per complex vector, from the rows' second differences (see module doc).
+
+    The noise of per-revolution vectors changes along a run (a revolution holds fewer
+    samples at speed: its variance grows with the speed), so the robust estimate is taken
+    in ``bands`` consecutive groups of rows and the floor is the RMS over the rows of their
+    band's value.  A band's median ignores the peak and the ripples as long as they fill
+    less than half of it; where a band is dominated by them (its value above twice its
+    neighbours' larger one), the neighbours' larger one is used.
+    """
     Y = table.vectors[1]
     d2 = Y[2:] - 2 * Y[1:-1] + Y[:-2]
-    p2 = np.abs(d2[np.isfinite(d2)]) ** 2
+    p2 = np.abs(d2) ** 2
+    p2 = p2.reshape(len(p2), -1)
+    ok = np.isfinite(p2).all(axis=1)
+    p2 = p2[ok]
     if p2.size == 0:
         return float("nan")
-    return float(math.sqrt(np.median(p2) / (6.0 * math.log(2.0))))
+    n_b = max(1, min(bands, len(p2) // 20))
+    groups = np.array_split(np.arange(len(p2)), n_b)
+    level = np.array([np.median(p2[g]) for g in groups]) / (6.0 * math.log(2.0))
+    for b in range(n_b):
+        nb = [level[j] for j in (b - 1, b + 1) if 0 <= j < n_b]
+        if nb and level[b] > 2.0 * max(nb):
+            level[b] = max(nb)
+    per_row = np.concatenate([np.full(len(g), lv) for g, lv in zip(groups, level, strict=True)])
+    return float(math.sqrt(np.mean(per_row)))
 
 
 #: share of the speeds (with a clear 1X) at which a backward 1X whirl means wrong probe angles
@@ -147,6 +166,27 @@ class VectorDiagnosis:
     def verdict(self) -> str:
         return verdict_of(bool(self.missing), self.after.rms / self.noise_floor if self.noise_floor > 0 else math.inf)
 
+    def unbalance(self, mass_kg: float | None = None) -> dict | None:
+        """The identified unbalance: eccentricity in the table's unit and its angle.
+
+        In the translation (Jeffcott) model the unbalance coefficient is the mass
+        eccentricity ``e`` itself (``e`` times the speed squared drives the whirl), in the
+        displacement unit of the vectors; its angle is where the heavy spot sits, counted
+        like a ``lag`` phase from the keyphasor.  With the disk's mass, ``U = m e`` in g·mm.
+        Without the probes' angles the first probe's view is reported.
+        """
+        c = self.after.forcing.get("unbalance")
+        if c is None:
+            return None
+        e = complex(c[0], c[1])
+        out = {"eccentricity": abs(e), "angle_deg_lag": float(np.mod(-np.degrees(np.angle(e)), 360.0)),
+               "g_mm": None}
+        if mass_kg is not None and self.table.amp_unit in ("um", "mil", "mm", "m"):
+            from ..measurements.vectors import AMPLITUDE_UNITS
+
+            out["g_mm"] = mass_kg * 1e3 * abs(e) * AMPLITUDE_UNITS[self.table.amp_unit] * 1e3
+        return out
+
     def unexplained_bands(self) -> list[dict]:
         """Speed bands (rpm) where the final residual is above 1.5x the floor."""
         mag = np.sqrt(np.nanmean(np.abs(self.after.residual) ** 2, axis=1))
@@ -189,6 +229,7 @@ class VectorDiagnosis:
             "physical": _jsonable(self.after.values()),
             "candidates": self.tested,
             "rejected": self.rejected,
+            "unbalance": self.unbalance(),
             "unexplained": self.unexplained_bands() if self.verdict in ("partly_explained", "unexplained") else [],
             "notes": list(self.notes),
             "standard_errors_kind": "HAC (Newey-West, Bartlett kernel, Andrews bandwidth), scores summed per row",
@@ -307,33 +348,43 @@ class VectorDiagnosis:
 
     def report(self, path, *, overwrite: bool = False):
         """A self-contained HTML report: verdict, criticals, Bode, polar, residual, Campbell."""
+        from ..outputs import atomic_write_text, check_writable
+
+        path = check_writable(path, overwrite=overwrite)
+        doc = ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>rotor-id: 1X vectors</title>"
+               "<style>body{font-family:sans-serif;max-width:1000px;margin:auto}td,th{border:1px solid #bbb;"
+               "padding:3px 8px}table{border-collapse:collapse}</style></head><body>"
+               "<h1>rotor-id diagnosis of order-tracked vectors</h1>" + self.html_section() + "</body></html>")
+        return atomic_write_text(path, doc, overwrite=overwrite)
+
+    def html_section(self, level: int = 2) -> str:
+        """The vectors' verdict, criticals and figures as an HTML fragment."""
         import base64
         import html
         import io
 
         import matplotlib.pyplot as plt
 
-        from ..outputs import atomic_write_text, check_writable
-
-        path = check_writable(path, overwrite=overwrite)
         imgs = []
         for name, fig in self.figures().items():
             buf = io.BytesIO()
             fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
             plt.close(fig)
-            imgs.append(f'<h2>{html.escape(name)}</h2><img alt="{html.escape(name)}" style="max-width:100%" '
-                        f'src="data:image/png;base64,{base64.b64encode(buf.getvalue()).decode()}">')
+            imgs.append(f'<h{level + 1}>{html.escape(name)}</h{level + 1}><img alt="{html.escape(name)}" '
+                        f'style="max-width:100%" src="data:image/png;base64,'
+                        f'{base64.b64encode(buf.getvalue()).decode()}">')
         d = self.to_dict()
         crit = "".join(f"<tr><td>{c['rpm']:.1f}</td><td>{c['damping_ratio']:.4f}</td></tr>" for c in d["criticals"])
-        doc = (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>rotor-id: 1X vectors</title>"
-               f"<style>body{{font-family:sans-serif;max-width:1000px;margin:auto}}td,th{{border:1px solid #bbb;"
-               f"padding:3px 8px}}table{{border-collapse:collapse}}</style></head><body>"
-               f"<h1>rotor-id diagnosis of order-tracked vectors</h1>"
-               f"<section class='verdict verdict-{html.escape(self.verdict)}'><p><b>Verdict: "
-               f"{html.escape(self.verdict)}</b></p><pre>{html.escape(self.summary())}</pre></section>"
-               f"<h2>Critical speeds</h2><table><tr><th>rpm</th><th>damping ratio</th></tr>{crit}</table>"
-               + "".join(imgs) + "</body></html>")
-        return atomic_write_text(path, doc, overwrite=overwrite)
+        unb = d.get("unbalance")
+        unb_html = ""
+        if unb:
+            unb_html = (f"<p>Unbalance: eccentricity {unb['eccentricity']:.4g} {html.escape(d['amplitude_unit'])} at "
+                        f"{unb['angle_deg_lag']:.0f} deg (lag from the keyphasor)"
+                        + (f", {unb['g_mm']:.4g} g·mm" if unb.get("g_mm") is not None else "") + ".</p>")
+        return (f"<section class='verdict verdict-{html.escape(self.verdict)}'><p><b>1X vectors: "
+                f"{html.escape(self.verdict)}</b></p><pre>{html.escape(self.summary())}</pre></section>"
+                f"<h{level}>Critical speeds</h{level}><table><tr><th>rpm</th><th>damping ratio</th></tr>{crit}</table>"
+                + unb_html + "".join(imgs))
 
 
 def _unit_label(unit: str) -> str:

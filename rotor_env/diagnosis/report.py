@@ -643,8 +643,12 @@ class DiagnosisFigures:
         parts.append("</section>")
         return "\n".join(parts)
 
-    def report(self, path: str | Path, *, overwrite: bool = False) -> Path:
-        """A self-contained HTML report (figures embedded as PNG)."""
+    def report(self, path: str | Path, *, overwrite: bool = False, preamble: str = "") -> Path:
+        """A self-contained HTML report (figures embedded as PNG).
+
+        ``preamble``: HTML put after the title (a rig diagnosis puts its 1X-vector section
+        there: criticals, Bode and polar plots in the rig's units).
+        """
         import matplotlib.pyplot as plt
 
         path = check_writable(path, overwrite=overwrite)  # before the figures are drawn
@@ -697,6 +701,7 @@ p.verdict-word{{font-size:2em;font-weight:bold;margin:.2em 0}}
 .verdict-explained p.verdict-word,.verdict-explained_after_adding p.verdict-word{{color:#2a8a3a}}
 .verdict-partly_explained p.verdict-word{{color:#d98a00}}.verdict-unexplained p.verdict-word{{color:#c0392b}}img{{max-width:100%}}pre{{background:#f4f4f4;padding:.5em}}</style></head><body>
 <h1>rotor-id diagnosis</h1>
+{preamble}
 {self._verdict_html()}
 {self._lookalikes_html()}
 <h2>Summary</h2>

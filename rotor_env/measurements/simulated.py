@@ -40,7 +40,11 @@ class RigRun:
     params: RotorParams
 
     def vectors(self, rig: Rig, orders: tuple[int, ...] = (1, 2)) -> VectorTable:
-        """The order-tracked table of the probes (per revolution, lead convention)."""
+        """The order-tracked table of the probes (per revolution, lead convention); for a
+        one-plane rig only (a tilt rig's table is :meth:`RigRecord.vectors` of the loaded file)."""
+        if rig.model == "tilt":
+            raise ValueError("the 1X table of a two-plane rig is the tilt's: load the waveforms and use "
+                             "RigRecord.vectors()")
         t = self.columns["t"]
         phi = self.columns["_phi"]
         names = tuple(p.name for p in rig.probes)
@@ -81,9 +85,6 @@ def simulate_rig(
             raise ValueError(f"{name} must be a positive number, got {v!r}")
     if not math.isfinite(rpm_per_s) or rpm_per_s == 0 or (rpm_to - rpm_from) * rpm_per_s <= 0:
         raise ValueError(f"rpm_per_s = {rpm_per_s!r} does not go from {rpm_from:g} to {rpm_to:g} rpm")
-    if rig.model == "tilt":
-        raise ValueError("simulated rig runs are one-plane (translation) records; the tilt rig needs a disk "
-                         "position model that is not simulated here")
     w_ref = natural_rpm * SPEED_UNITS["rpm"]
     duration = (rpm_to - rpm_from) / rpm_per_s
     n = int(round(duration * sample_rate))
@@ -104,8 +105,12 @@ def simulate_rig(
                    initial=initial)
     t = meas.t / w_ref
     phi = meas.phi
-    u = meas.theta_y * LENGTH_UNIT
-    v = meas.theta_x * LENGTH_UNIT
+    if rig.model == "tilt":
+        # a rigid disk tilting about its centre (axial position 0): a plane at z moves z * tilt
+        u, v = meas.theta_y, meas.theta_x
+    else:
+        u = meas.theta_y * LENGTH_UNIT
+        v = meas.theta_x * LENGTH_UNIT
     rng = np.random.default_rng(seed)
     cols: dict[str, np.ndarray] = {"t": t}
     if rig.keyphasor is not None:
@@ -121,6 +126,8 @@ def simulate_rig(
     r = runout * np.exp(1j * math.radians(runout_phase_deg))
     for p in rig.probes:
         metres = u * math.cos(p.angle) + v * math.sin(p.angle)
+        if rig.model == "tilt":
+            metres = rig.planes[p.plane] * metres
         # the probe sees the track's runout at its own angle: phi - angle
         reading_um = metres / 1e-6 + np.real(r * np.exp(1j * (phi - p.angle))) * _unit_um(rig)
         reading_um = reading_um + rng.normal(0.0, noise * _unit_um(rig), len(t)) if noise > 0 else reading_um

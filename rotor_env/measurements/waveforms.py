@@ -65,13 +65,19 @@ class RigRecord:
         return self.speed / SPEED_UNITS["rpm"]
 
     def vectors(self, orders: tuple[int, ...] = (1, 2), revolutions: int = 1) -> VectorTable:
-        """Order-tracked vectors of every probe (per revolution), in the reporting unit."""
-        names = tuple(p.name for p in self.rig.probes)
-        X = np.column_stack([self.readings[n] - self.readings[n].mean() for n in names])
+        """Order-tracked vectors per revolution: of every probe (one plane, in the rig's unit),
+        or of the disk's tilt (two planes: ``tilt_u``, ``tilt_v`` along the model's axes, in urad)."""
+        if self.rig.model == "tilt":
+            names = ("tilt_u", "tilt_v")
+            X = np.column_stack([self.u - self.u.mean(), self.v - self.v.mean()]) * 1e6
+            angles, unit = np.array([0.0, 0.5 * math.pi]), "urad"
+        else:
+            names = tuple(p.name for p in self.rig.probes)
+            X = np.column_stack([self.readings[n] - self.readings[n].mean() for n in names])
+            angles, unit = np.array([p.angle for p in self.rig.probes]), self.rig.amp_unit
         tr = order_track(self.t, X, self.phi, orders, revolutions, upsample=4)
-        return VectorTable(speed=tr.speed, t=tr.t, probes=names, vectors=tr.vectors, amp_unit=self.rig.amp_unit,
-                           angles=np.array([p.angle for p in self.rig.probes]), source=self.source,
-                           notes=self.notes)
+        return VectorTable(speed=tr.speed, t=tr.t, probes=names, vectors=tr.vectors, amp_unit=unit,
+                           angles=angles, source=self.source, notes=self.notes)
 
     def compensate_runout(self, runout: dict[str, complex] | None = None, below_rpm: float | None = None) -> RigRecord:
         """Subtract the probes' runout: a 1X vector per probe (``lead``), or the slow-roll
@@ -132,6 +138,13 @@ class RigRecord:
             out[:, j] = derive_rates(out[:, 0], out[:, src], 1)
         for j, src in ((8, 4), (9, 5)):
             out[:, j] = derive_rates(out[:, 0], out[:, src], 2)
+        # the anti-aliasing filter and the rates' end windows ring at the record's two ends:
+        # the first and last revolution are left out
+        ph = out[:, 1]
+        keep = (ph >= ph[0] + 2 * math.pi) & (ph <= ph[-1] - 2 * math.pi)
+        if keep.sum() >= 100:
+            out = out[keep]
+            out[:, 0] -= out[0, 0]
         unit = "mm" if self.rig.model == "translation" else "rad"
         return Measurements(out, source=f"{self.source} (rig: {self.rig.model} in {unit}, t' = t * {w_ref:.6g}/s, "
                                         f"every {q} samples)")
