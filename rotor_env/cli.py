@@ -319,6 +319,23 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 
 def _diagnose_measured(args: argparse.Namespace):
     """``diagnose --vectors`` (an order-tracked table) or ``diagnose --rig`` (raw waveforms)."""
+    if args.effect:
+        raise _UsageError("--effect (a user effect) works on dimensionless files, not yet with --vectors/--rig")
+    return diagnose_file(args.file, model=args.model, ip=args.ip, alpha=args.alpha, vectors=args.vectors,
+                         rig=args.rig, amp_unit=args.amp_unit, phase=args.phase,
+                         progress=sys.stderr.isatty() and not args.json)
+
+
+def diagnose_file(file, *, model: str | None = None, ip: float | None = None, alpha: float = 0.05,
+                  slow_roll: float | None = None, vectors: bool = False, rig=None, amp_unit: str = "um",
+                  phase: str = "lag", progress: bool = False):
+    """Diagnose one file as ``rotor-id diagnose`` does (shared by ``diagnose`` and ``batch``).
+
+    ``model``: the comma-separated ``--model`` text (None: the default model of the kind of
+    file).  A dimensionless measurement file unless ``vectors`` (an order-tracked table)
+    or ``rig`` (a rig file path or a loaded :class:`~rotor_env.measurements.rig.Rig`:
+    raw waveforms, or the table's probes with ``vectors``).
+    """
     from .diagnosis.from_rig import diagnose_rig
     from .diagnosis.from_vectors import VECTOR_CANDIDATES, VECTOR_MODEL, diagnose_vectors
     from .diagnosis.model import DEFAULT_MODEL
@@ -326,19 +343,26 @@ def _diagnose_measured(args: argparse.Namespace):
     from .measurements.vectors import load_vector_table
     from .measurements.waveforms import load_waveforms
 
-    rig = load_rig(args.rig) if args.rig else None
-    if args.effect:
-        raise _UsageError("--effect (a user effect) works on dimensionless files, not yet with --vectors/--rig")
-    if args.vectors:
+    if isinstance(rig, (str, bytes)) or hasattr(rig, "__fspath__"):
+        rig = load_rig(rig)
+    if not vectors and rig is None:
+        from .diagnosis import LIBRARY_CANDIDATES, diagnose
+        from .io import load_measurements
+
+        meas = load_measurements(file)
+        names = _model_list(model, DEFAULT_MODEL)
+        return diagnose(meas, names, candidates=[c for c in LIBRARY_CANDIDATES if c not in names], ip=ip,
+                        alpha=alpha, slow_roll=slow_roll, progress=progress)
+    if vectors:
         angles = {p.name: math.degrees(p.angle) for p in rig.probes} if rig is not None else None
-        table = load_vector_table(args.file, amp_unit=args.amp_unit, phase=args.phase, angles=angles)
-        model = _model_list(args.model, VECTOR_MODEL) if args.model else list(VECTOR_MODEL)
-        ip = rig.ip if rig is not None else (args.ip if args.ip is not None else 0.0)
-        return diagnose_vectors(table, ip=ip, model=model, alpha=args.alpha, phase=args.phase,
-                                candidates=[c for c in VECTOR_CANDIDATES if c not in model])
-    record = load_waveforms(args.file, rig)
-    model = _model_list(args.model, DEFAULT_MODEL)
-    return diagnose_rig(record, model, alpha=args.alpha, progress=sys.stderr.isatty() and not args.json)
+        table = load_vector_table(file, amp_unit=amp_unit, phase=phase, angles=angles)
+        names = _model_list(model, VECTOR_MODEL) if model else list(VECTOR_MODEL)
+        ip = rig.ip if rig is not None else (ip if ip is not None else 0.0)
+        return diagnose_vectors(table, ip=ip, model=names, alpha=alpha, phase=phase,
+                                candidates=[c for c in VECTOR_CANDIDATES if c not in names])
+    record = load_waveforms(file, rig)
+    names = _model_list(model, DEFAULT_MODEL)
+    return diagnose_rig(record, names, alpha=alpha, progress=progress)
 
 
 def _simulate_rig(args: argparse.Namespace, values: dict, ip: float, crack, out) -> int:
@@ -513,11 +537,22 @@ def _add_diagnose_parsers(sub) -> None:
             p.set_defaults(func=_cmd_fit)
 
 
+def _version() -> str:
+    """The installed distribution's version (``rotor-id --version``)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("rotor-id")
+    except PackageNotFoundError:  # running from a source tree that was never installed
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="rotor-id",
         description="Online identification of the physical effects of an accelerating rotor.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="the main walkthrough: diagnose a rotor with a hidden crack")
     p.add_argument("--out", default="out/walkthrough", metavar="DIR",
@@ -533,6 +568,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .monitor.cli import add_monitor_parser
 
     add_monitor_parser(sub)
+    from .fleet import add_batch_parser
+
+    add_batch_parser(sub)
     _add_plugin_parsers(sub)
     return parser
 
