@@ -256,6 +256,19 @@ def test_the_missing_1x_effect_is_found_and_the_error_falls(rig, extra, runout, 
         assert rpms[1] == pytest.approx(1650 * math.sqrt(1 + 0.08), rel=0.01)
 
 
+def test_absolute_time_stamps_give_the_same_fit(rig):
+    """A table stamped in epoch seconds (1.7e9 s) fits as one starting at 0."""
+    from rotor_env.diagnosis.synchronous import SynchronousModel, fit_vectors
+
+    table = _table(rig, _params(), rpm=(800.0, 2500.0), rpm_per_s=300.0, sample_rate=2000.0)
+    stamped = VectorTable(table.speed, table.t + 1.7e9, table.probes, table.vectors, table.amp_unit,
+                          angles=table.angles)
+    model = SynchronousModel(("viscous_damping", "unbalance"))
+    a, b = fit_vectors(table, model, method="transient"), fit_vectors(stamped, model, method="transient")
+    assert b.criticals[0]["rpm"] == pytest.approx(a.criticals[0]["rpm"], rel=1e-6)
+    assert b.rms == pytest.approx(a.rms, rel=1e-3)
+
+
 def test_probe_angles_swapped_are_a_clear_error(rig):
     table = _table(rig, _params())
     swapped = VectorTable(table.speed, table.t, table.probes, table.vectors, table.amp_unit,

@@ -378,7 +378,10 @@ class _Problem:
         if not fc:
             B = np.empty((len(W), 2, 0), dtype=complex)
         elif method == "transient":
-            B = _transient(self.model, coef, fc, self.table.t * w_ref, W, coast_down=self.coast_down)
+            # time from the first row: a table may carry absolute time stamps (1.7e9 s), whose
+            # last digits a dimensionless grid of 0.05 would not resolve
+            B = _transient(self.model, coef, fc, (self.table.t - self.table.t[0]) * w_ref, W,
+                           coast_down=self.coast_down)
         else:
             B = _quasi_steady(self.model, coef, fc, W, self.Wdot_abs / w_ref**2)
         probes = np.einsum("pc,rcn->rpn", self.P, B)
