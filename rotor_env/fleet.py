@@ -127,7 +127,7 @@ def _file_recordings(files: list[Path], root: Path | None, id_column: str) -> li
 def _safe_name(rid: str) -> str:
     """A file name for a recording id (ids may hold '/' and other characters)."""
     name = re.sub(r"[^A-Za-z0-9._=-]+", "_", rid.replace("/", "__")).strip("._") or "recording"
-    if name != rid:  # two ids that clean to one name stay apart
+    if name != rid.replace("/", "__") or "__" in rid:  # two ids that clean to one name stay apart
         import hashlib
 
         name += "-" + hashlib.sha1(rid.encode()).hexdigest()[:8]
