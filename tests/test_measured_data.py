@@ -256,6 +256,39 @@ def test_the_missing_1x_effect_is_found_and_the_error_falls(rig, extra, runout, 
         assert rpms[1] == pytest.approx(1650 * math.sqrt(1 + 0.08), rel=0.01)
 
 
+def test_a_second_critical_in_the_run_is_found_as_a_second_mode():
+    """Two modes (1650 and 3300 rpm, zeta 0.02 and 0.03) swept at 230 rpm/s: the single-mode
+    model fails, the second mode is added, both criticals come back within 1 %."""
+    rpm = 2 * math.pi / 60
+    t = np.arange(0.0, 14.0, 1 / 2500)
+
+    def mode(wn_rpm, c, tau, beta):
+        wn = wn_rpm * rpm
+        p = RotorParams(ip=0.0, values={"c": c, "tau": tau, "beta": beta},
+                        effects=("stiffness", "viscous_damping", "unbalance"))
+        from rotor_env.simulator import RunUp, Simulator
+
+        m = Simulator(p).run(t_end=t[-1] * wn, dt=(t[1] - t[0]) * wn,
+                             run_up=RunUp(rate=230 * rpm / wn**2, speed0=300 * rpm / wn))
+        return m.theta_y[: len(t)], m.theta_x[: len(t)], m.phi[: len(t)]
+
+    u1, v1, phi = mode(1650, 0.04, 0.005, 0.6)
+    u2, v2, _ = mode(3300, 0.06, 0.002, 2.0)
+    u, v = (u1 + u2) * 1000, (v1 + v2) * 1000
+    ang = np.radians([45, -45])
+    X = np.column_stack([u * np.cos(g) + v * np.sin(g) for g in ang])
+    X += np.random.default_rng(0).normal(0, 0.3, X.shape)
+    tr = order_track(t, X, phi, (1,))
+    keep = np.nonzero(tr.speed > 900 * rpm)[0][::2]  # every other revolution, past the start-up transient
+    table = VectorTable(tr.speed[keep], tr.t[keep], ("x", "y"), {1: tr.vectors[1][keep]}, angles=ang)
+    out = diagnose_vectors(table, candidates=("second_mode", "shaft_bow")).to_dict()
+    assert out["missing"] == ["second_mode"] and out["verdict"] == "explained_after_adding"
+    assert [round(c["rpm"] / 100) for c in out["criticals"]] == [16, 33]
+    for c, (wn, zeta) in zip(out["criticals"], ((1650, 0.02), (3300, 0.03)), strict=True):
+        assert c["rpm"] == pytest.approx(wn * math.sqrt(1 - zeta**2), rel=0.01)
+        assert c["damping_ratio"] == pytest.approx(zeta, rel=0.02)
+
+
 def test_absolute_time_stamps_give_the_same_fit(rig):
     """A table stamped in epoch seconds (1.7e9 s) fits as one starting at 0."""
     from rotor_env.diagnosis.synchronous import SynchronousModel, fit_vectors

@@ -32,14 +32,15 @@ from identifier.hac import hac_covariance, wald_test
 
 from ..effects import get_effect
 from ..measurements.vectors import SPEED_UNITS, VectorTable, to_phase
-from .synchronous import RUNOUT, SynchronousModel, VectorFit, fit_vectors
+from .synchronous import RUNOUT, SECOND_MODE, SynchronousModel, VectorFit, fit_vectors
 from .verdict import FLOOR_RATIO, verdict_of
 
 __all__ = ["VECTOR_CANDIDATES", "VECTOR_MODEL", "VectorDiagnosis", "check_whirl_direction", "diagnose_vectors",
            "vector_noise_floor"]
 
 VECTOR_MODEL: tuple[str, ...] = ("viscous_damping", "unbalance")
-VECTOR_CANDIDATES: tuple[str, ...] = ("shaft_bow", RUNOUT, "support_anisotropy", "cross_coupled_stiffness")
+VECTOR_CANDIDATES: tuple[str, ...] = ("shaft_bow", RUNOUT, "support_anisotropy", "cross_coupled_stiffness",
+                                       SECOND_MODE)
 #: a candidate must remove this share of the residual energy above the floor
 MIN_GAIN = 0.10
 #: and be significant at this level (HAC Wald test), and stricter than alpha when alpha is loose
@@ -137,6 +138,16 @@ def _wald(fit: VectorFit, effect: str) -> tuple[float, float]:
 
 def _plausible(fit: VectorFit, effect: str) -> tuple[bool, str]:
     if effect == RUNOUT:
+        return True, ""
+    if effect == SECOND_MODE:
+        (w2, c2), = fit.extra_modes[-1:]
+        lo, hi = float(fit.table.speed.min()), float(fit.table.speed.max())
+        if not 0.5 * lo <= w2 <= 1.2 * hi:
+            return False, f"its natural frequency {w2 / SPEED_UNITS['rpm']:.0f} rpm lies outside the run"
+        if abs(w2 / fit.w_ref - 1.0) < 0.05:
+            return False, "it sits on the first mode (a split or a skewed peak, not another mode)"
+        if c2 > 0.6:
+            return False, f"damping ratio {c2 / 2:.2f} above 0.3: not a resonance"
         return True, ""
     values = fit.values()[effect]
     for p in get_effect(effect).parameters:
@@ -392,6 +403,9 @@ def _unit_label(unit: str) -> str:
 
 
 def _cause(name: str) -> str:
+    if name == SECOND_MODE:
+        return ("a second mode of the rotor and its supports (another critical speed) in the run: the rotor "
+                "model's single mode cannot carry it")
     if name == RUNOUT:
         return "probe runout: a constant 1X vector (mechanical/electrical runout of the probe track), seen at slow roll"
     return get_effect(name).cause

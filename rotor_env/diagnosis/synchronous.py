@@ -58,6 +58,7 @@ from ..simulator import compile_accel, integrate_profile, smooth_effects
 
 __all__ = [
     "RUNOUT",
+    "SECOND_MODE",
     "VECTOR_EFFECTS",
     "SynchronousModel",
     "VectorFit",
@@ -67,6 +68,9 @@ __all__ = [
 
 #: the measurement term "probe runout": a constant 1X vector per probe
 RUNOUT = "runout"
+#: a second mode of the rotor-bearing system in the speed range (another critical speed):
+#: an isotropic oscillator of its own natural frequency, damping and modal unbalance
+SECOND_MODE = "second_mode"
 #: effects that show in 1X data and that the synchronous model can carry
 VECTOR_EFFECTS: tuple[str, ...] = (
     "viscous_damping", "unbalance", "shaft_bow", "support_anisotropy", "cross_coupled_stiffness",
@@ -107,12 +111,14 @@ def _classify(name: str) -> str:
 class SynchronousModel:
     """The effects of a 1X model (``stiffness`` is implicit: ``w_ref`` carries it).
 
-    ``runout``: a constant vector per probe is part of the model.
+    ``runout``: a constant vector per probe is part of the model.  ``modes``: 2 adds a
+    second mode (:data:`SECOND_MODE`) beside the rotor model's own.
     """
 
     effects: tuple[str, ...]
     ip: float = 0.0
     runout: bool = False
+    modes: int = 1
     kinds: dict[str, str] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -136,12 +142,16 @@ class SynchronousModel:
 
     def with_effect(self, name: str) -> SynchronousModel:
         if name == RUNOUT:
-            return SynchronousModel(self.effects, self.ip, True)
-        return SynchronousModel((*self.effects, name), self.ip, self.runout)
+            return SynchronousModel(self.effects, self.ip, True, self.modes)
+        if name == SECOND_MODE:
+            if self.modes >= 2:
+                raise ValueError("the model has its second mode already")
+            return SynchronousModel(self.effects, self.ip, self.runout, 2)
+        return SynchronousModel((*self.effects, name), self.ip, self.runout, self.modes)
 
     @property
     def names(self) -> tuple[str, ...]:
-        return (*self.effects, *((RUNOUT,) if self.runout else ()))
+        return (*self.effects, *((RUNOUT,) if self.runout else ()), *((SECOND_MODE,) if self.modes > 1 else ()))
 
     # ---------------------------------------------------------- coefficient layout
     def _slots(self) -> dict[str, slice]:
@@ -199,6 +209,8 @@ class VectorFit:
     param_names: tuple[str, ...]
     params: np.ndarray
     success: bool = True
+    #: (w_ref in rad/s, viscous damping c) of each extra mode
+    extra_modes: tuple[tuple[float, float], ...] = ()
 
     @property
     def residual(self) -> np.ndarray:
@@ -212,10 +224,14 @@ class VectorFit:
 
     @property
     def criticals(self) -> list[dict[str, float]]:
-        return critical_speeds(self.model, self.coef(), self.w_ref, self.table.speed)
+        out = critical_speeds(self.model, self.coef(), self.w_ref, self.table.speed)
+        for w, c in self.extra_modes:
+            iso = _isotropic(self.model.ip)
+            out += critical_speeds(iso, iso.coef_vector({"viscous_damping": np.array([c])}), w, self.table.speed)
+        return sorted(out, key=lambda d: d["rpm"])
 
     def coef(self) -> np.ndarray:
-        return self.model.coef_vector(self.structural, self.forcing)
+        return self.model.coef_vector(self.structural, {k: v for k, v in self.forcing.items() if k != SECOND_MODE})
 
     def values(self) -> dict[str, dict[str, float]]:
         """Each effect's physical parameters (forcing amplitudes in the table's unit)."""
@@ -226,6 +242,10 @@ class VectorFit:
         if self.runout is not None:
             out[RUNOUT] = {p: float(abs(v)) for p, v in zip(self.table.probes, self.runout, strict=True)}
         out["natural_frequency"] = {"rpm": self.w_ref / SPEED_UNITS["rpm"]}
+        for w, c in self.extra_modes:
+            u = self.forcing.get(SECOND_MODE, np.zeros(2))
+            out[SECOND_MODE] = {"natural_frequency_rpm": w / SPEED_UNITS["rpm"], "c": c,
+                                "unbalance": float(np.hypot(u[0], u[1]))}
         return out
 
 
@@ -348,6 +368,8 @@ class _Problem:
             for q in range(slots[e].stop - slots[e].start):
                 self.basis.append((e, q))
         self.struct_sizes = [(e, slots[e].stop - slots[e].start) for e in model.structural]
+        self.n_extra = model.modes - 1
+        self.basis += [(SECOND_MODE, q) for _ in range(self.n_extra) for q in range(2)]
         W_abs = table.speed
         self.coast_down = bool(W_abs[-1] < W_abs[0])
         if table.t is not None:
@@ -364,34 +386,47 @@ class _Problem:
             j += n
         return w_ref, st
 
+    def extra_modes(self, x: np.ndarray) -> list[tuple[float, float]]:
+        """(w_ref, c) of each extra mode: the last two parameters per mode."""
+        j = 1 + sum(n for _, n in self.struct_sizes)
+        return [(math.exp(x[j + 2 * m]), float(x[j + 2 * m + 1])) for m in range(self.n_extra)]
+
     def basis_vectors(self, x: np.ndarray, method: str | None = None) -> np.ndarray:
         """(rows, probes, n_lin) complex basis of the linear parameters."""
         w_ref, st = self.unpack(x)
-        coef = self.model.coef_vector(st)
-        fc = []
-        for e, q in self.basis:
-            c = np.zeros_like(coef)
-            c[self.model._slots()[e].start + q] = 1.0
-            fc.append(c)
-        W = self.table.speed / w_ref
         method = method or self.method
-        if not fc:
-            B = np.empty((len(W), 2, 0), dtype=complex)
-        elif method == "transient":
-            # time from the first row: a table may carry absolute time stamps (1.7e9 s), whose
-            # last digits a dimensionless grid of 0.05 would not resolve
-            B = _transient(self.model, coef, fc, (self.table.t - self.table.t[0]) * w_ref, W,
-                           coast_down=self.coast_down)
-        else:
-            B = _quasi_steady(self.model, coef, fc, W, self.Wdot_abs / w_ref**2)
+        own = [(e, q) for e, q in self.basis if e != SECOND_MODE]
+        B = self._mode_basis(self.model, self.model.coef_vector(st), own, w_ref, method)
+        for w2, c2 in self.extra_modes(x):
+            iso = _isotropic(self.model.ip)
+            B2 = self._mode_basis(iso, iso.coef_vector({"viscous_damping": np.array([c2])}),
+                                  [("unbalance", 0), ("unbalance", 1)], w2, method)
+            B = np.concatenate([B, B2], axis=2)
         probes = np.einsum("pc,rcn->rpn", self.P, B)
         if self.model.runout:
             n_p = len(self.table.probes)
-            R = np.zeros((len(W), n_p, n_p), dtype=complex)
+            R = np.zeros((len(self.table.speed), n_p, n_p), dtype=complex)
             for p in range(n_p):
                 R[:, p, p] = 1.0
             probes = np.concatenate([probes, R], axis=2)
         return probes
+
+    def _mode_basis(self, model: SynchronousModel, coef: np.ndarray, basis, w_ref: float, method: str) -> np.ndarray:
+        """(rows, 2, n) responses of one mode to each unit forcing coefficient."""
+        fc = []
+        for e, q in basis:
+            c = np.zeros_like(coef)
+            c[model._slots()[e].start + q] = 1.0
+            fc.append(c)
+        W = self.table.speed / w_ref
+        if not fc:
+            return np.empty((len(W), 2, 0), dtype=complex)
+        if method == "transient":
+            # time from the first row: a table may carry absolute time stamps (1.7e9 s), whose
+            # last digits a dimensionless grid of 0.05 would not resolve
+            return _transient(model, coef, fc, (self.table.t - self.table.t[0]) * w_ref, W,
+                              coast_down=self.coast_down)
+        return _quasi_steady(model, coef, fc, W, self.Wdot_abs / w_ref**2)
 
     def expand(self, B: np.ndarray) -> np.ndarray:
         """Without the probes' angles each probe sees the whirl from its own unknown angle:
@@ -440,6 +475,11 @@ class _Problem:
         return np.concatenate([r.real, r.imag])
 
 
+def _isotropic(ip: float) -> SynchronousModel:
+    """The plain mode: stiffness, viscous damping and unbalance (an extra mode's model)."""
+    return SynchronousModel(("viscous_damping", "unbalance"), ip=ip)
+
+
 def _initial_guesses(table: VectorTable, ip: float) -> list[tuple[float, float]]:
     """(w_ref, c) starts from the amplitude peak and its half-power width."""
     Y = table.vectors[1]
@@ -480,13 +520,21 @@ def fit_vectors(
     if method == "auto":
         chosen = start.method if start is not None else ("transient" if table.t is not None else "quasi-steady")
     prob = _Problem(model, table, chosen)
-    n_struct = sum(n for _, n in prob.struct_sizes)
+    n_struct = sum(n for _, n in prob.struct_sizes) + 2 * prob.n_extra
     starts: list[np.ndarray] = []
     if start is not None:
         x = [math.log(start.w_ref)]
         for e, n in prob.struct_sizes:
             x += list(start.structural.get(e, np.full(n, _nonzero_start(e))))
-        starts.append(np.array(x))
+        extra = [[math.log(w), c] for w, c in start.extra_modes]
+        if len(extra) < prob.n_extra:
+            # a new mode where the fit so far fails most, at a few dampings
+            mag = np.sqrt(np.nanmean(np.abs(start.residual) ** 2, axis=1))
+            w_new = float(table.speed[int(np.nanargmax(mag))])
+            for f, c in ((1.0, 0.06), (0.97, 0.03), (1.03, 0.03), (1.0, 0.2)):
+                starts.append(np.array(x + [v for m in extra for v in m] + [math.log(w_new * f), c]))
+        else:
+            starts.append(np.array(x + [v for m in extra for v in m]))
     starts += [np.asarray(s, dtype=float) for s in extra_starts]
     if start is None:
         for w0, c0 in _initial_guesses(table, model.ip):
@@ -496,6 +544,10 @@ def fit_vectors(
             starts.append(np.array(x))
     lower = np.full(1 + n_struct, -np.inf)
     upper = np.full(1 + n_struct, np.inf)
+    for m in range(prob.n_extra):
+        k = 1 + n_struct - 2 * (prob.n_extra - m)
+        lower[k], upper[k] = math.log(0.3 * float(table.speed.min())), math.log(2.0 * float(table.speed.max()))
+        lower[k + 1], upper[k + 1] = 1e-4, 2.0
     j = 1
     for e, n in prob.struct_sizes:
         eff = get_effect(e)
@@ -516,7 +568,7 @@ def fit_vectors(
                 best = res
         return best
 
-    if chosen == "transient" and start is None:
+    if chosen == "transient" and start is None and prob.n_extra == 0:
         # the many starts on the cheap quasi-steady model; the transient refines the best
         # (its peak is delayed: the quasi-steady w_ref is off by a few per cent either way)
         best_q = solve(_Problem(model, table, "quasi-steady"), starts)
@@ -555,12 +607,16 @@ def _finish(prob: _Problem, x: np.ndarray, success: bool) -> VectorFit:
     forcing: dict[str, np.ndarray] = {}
     # the first probe's copy when each probe has its own (no angles): its size is what is reported
     for (e, q), v in zip(prob.basis, sol[: len(prob.basis)], strict=True):
-        forcing.setdefault(e, np.zeros(len(get_effect(e).coefficients)))[q] = v
+        if e == SECOND_MODE:
+            forcing.setdefault(e, np.zeros(2))[q] = v
+        else:
+            forcing.setdefault(e, np.zeros(len(get_effect(e).coefficients)))[q] = v
     runout = None
     if prob.model.runout:
         runout = sol[n_f::2] + 1j * sol[n_f + 1 :: 2]
     # Jacobian of the whole residual w.r.t. all parameters (nonlinear and linear), for the HAC tests
     names = ["log_w_ref"] + [f"{e}[{q}]" for e, n in prob.struct_sizes for q in range(n)]
+    names += [f"{SECOND_MODE}.{k}" for _ in range(prob.n_extra) for k in ("log_w", "c")]
     copies = prob.n_forcing // max(len(prob.basis), 1)
     names += [f"{e}[{q}]" + (f"@{p}" if copies > 1 else "") for p in prob.table.probes[:copies]
               for e, q in prob.basis]
@@ -581,7 +637,7 @@ def _finish(prob: _Problem, x: np.ndarray, success: bool) -> VectorFit:
         tp[i] += step
         J[:, i] = (full(tp) - r0) / step
     return VectorFit(prob.model, prob.table, w_ref, st, forcing, runout, pred, prob.method, -J, tuple(names),
-                     theta, bool(success))
+                     theta, bool(success), tuple(prob.extra_modes(x)))
 
 
 # ----------------------------------------------------------------- criticals
