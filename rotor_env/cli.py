@@ -354,7 +354,10 @@ def diagnose_file(file, *, model: str | None = None, ip: float | None = None, al
         return diagnose(meas, names, candidates=[c for c in LIBRARY_CANDIDATES if c not in names], ip=ip,
                         alpha=alpha, slow_roll=slow_roll, progress=progress)
     if vectors:
-        angles = {p.name: math.degrees(p.angle) for p in rig.probes} if rig is not None else None
+        # one plane: the probes see one orbit from their angles; probes in several planes see
+        # different amplitudes of the mode: each is then fitted on its own (no common geometry)
+        angles = ({p.name: math.degrees(p.angle) for p in rig.probes}
+                  if rig is not None and len(rig.plane_names) == 1 else None)
         table = load_vector_table(file, amp_unit=amp_unit, phase=phase, angles=angles)
         names = _model_list(model, VECTOR_MODEL) if model else list(VECTOR_MODEL)
         ip = rig.ip if rig is not None else (ip if ip is not None else 0.0)
