@@ -283,6 +283,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     # check every output target before the computation (a read-only folder, a folder
     # where a file should go: said now, not after the diagnosis has run)
     if args.report:
+        if Path(args.report).suffix.lower() not in (".html", ".htm"):
+            raise _UsageError(f"--report {args.report}: the report is HTML; name it .html")
         check_writable(args.report, overwrite=args.force)
     if args.figures:
         figs = Path(args.figures)

@@ -79,6 +79,21 @@ def test_bad_rig_descriptions_name_the_key(tmp_path, text, key):
     assert key in str(err.value) and str(path) in str(err.value)
 
 
+def test_axial_positions_given_per_probe(tmp_path):
+    path = tmp_path / "rig.yaml"
+    path.write_text("probes:\n"
+                    "  - {name: x1, angle_deg: 45, plane: A, axial_position_m: -0.1}\n"
+                    "  - {name: y1, angle_deg: -45, plane: A}\n"
+                    "  - {name: x2, angle_deg: 45, plane: B, axial_position_m: 0.2}\n"
+                    "  - {name: y2, angle_deg: -45, plane: B, axial_position_m: 0.2}\n")
+    r = load_rig(path)
+    assert r.model == "tilt" and r.planes == {"A": -0.1, "B": 0.2}
+    path.write_text(path.read_text().replace("plane: B, axial_position_m: 0.2}\n  - {name: y2",
+                                             "plane: B, axial_position_m: 0.3}\n  - {name: y2"))
+    with pytest.raises(RigError, match=r"probes\[3\].axial_position_m"):
+        load_rig(path)
+
+
 def test_rig_in_json_with_two_planes_is_a_tilt_rig(tmp_path):
     path = tmp_path / "rig.json"
     path.write_text(json.dumps({

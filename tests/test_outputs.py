@@ -120,3 +120,10 @@ def test_report_target_checked_before_loading(tmp_path, capsys):
     rc = main(["diagnose", str(tmp_path / "missing.csv"), "--report", str(folder)])
     assert rc == 2
     assert "is a folder" in capsys.readouterr().err
+
+
+def test_report_of_another_file_type_is_refused_before_the_work(tmp_path, capsys):
+    """Issue 11 item 6: --report x.png would have written HTML into a .png; refused, nothing written."""
+    rc = main(["diagnose", str(tmp_path / "missing.csv"), "--report", str(tmp_path / "r.png")])
+    assert rc == 2
+    assert "HTML" in capsys.readouterr().err and not (tmp_path / "r.png").exists()

@@ -185,6 +185,7 @@ def _build(raw: dict, where: str) -> Rig:
     else:
         raise RigError(f"{where}: key 'probes' must be a mapping name -> angle or a list of probes")
     probes = []
+    probe_z: dict[str, float] = {}  # axial positions given per probe
     for i, item in enumerate(items):
         key = f"probes[{i}]" if isinstance(probes_raw, list) else f"probes.{item.get('name')}"
         if not isinstance(item, dict) or "name" not in item or "angle_deg" not in item:
@@ -196,6 +197,12 @@ def _build(raw: dict, where: str) -> Rig:
         if abs(ang) > 360:
             raise RigError(f"{where}: key '{key}.angle_deg': {ang:g} is not an angle in degrees (-360..360)")
         probes.append(Probe(str(item["name"]), math.radians(ang), str(item.get("plane", "A"))))
+        if "axial_position_m" in item:
+            z = _num(where, f"{key}.axial_position_m", item["axial_position_m"])
+            z_plane = probe_z.setdefault(probes[-1].plane, z)
+            if z_plane != z:
+                raise RigError(f"{where}: key '{key}.axial_position_m': {z:g} m, but plane {probes[-1].plane!r} "
+                               f"is at {z_plane:g} m (its other probe): a plane has one axial position")
     names = [p.name for p in probes]
     dup = {n for n in names if names.count(n) > 1}
     if dup:
@@ -214,7 +221,7 @@ def _build(raw: dict, where: str) -> Rig:
                            f"{math.degrees(a.angle):g} and {math.degrees(b.angle):g} deg are (nearly) collinear; "
                            "an X-Y pair is mounted 90 deg apart")
         pos = planes_raw.get(pl, {}) if isinstance(planes_raw, dict) else {}
-        planes[pl] = _num(where, f"planes.{pl}.axial_position_m", pos.get("axial_position_m", 0.0))
+        planes[pl] = _num(where, f"planes.{pl}.axial_position_m", pos.get("axial_position_m", probe_z.get(pl, 0.0)))
     model = raw.get("model", "auto")
     _choice(where, "model", model, ("auto", "translation", "tilt"))
     if model == "auto":
