@@ -44,20 +44,46 @@ def add_train_parser(sub) -> None:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from .evaluation import evaluate, format_table
+    from .evaluation import EVAL_SEED0, evaluate, format_table, load_model
 
-    result = evaluate(args.env, args.episodes, progress=sys.stderr.isatty() and not args.json)
+    env_id = args.env
+    if env_id is None:
+        if not args.model:
+            print("rotor-id evaluate: error: give --env ID (or --model PATH, whose env is used)", file=sys.stderr)
+            return 2
+        env_id = json.loads((_model_folder(args.model[0]) / "run.json").read_text())["env"]
+        load_model(args.model[0])  # a clear error for a folder that is not a saved model
+    seed0 = EVAL_SEED0 if args.seed is None else args.seed
+    result = evaluate(env_id, args.episodes, progress=sys.stderr.isatty() and not args.json, models=args.model,
+                      baselines=args.baselines, seed0=seed0)
     if args.json:
-        print(json.dumps({"agents": result["agents"]}))
+        print(json.dumps(result))
     else:
-        print(f"{args.env}: {args.episodes} held-out rotors\n")
+        print(f"{env_id}: {args.episodes} held-out rotors (seeds {seed0}-{seed0 + args.episodes - 1}); "
+              "mean ± half-width of the 95 % interval (Student t) over the episodes\n")
         print(format_table(result))
     return 0
 
 
+def _model_folder(path: str):
+    from pathlib import Path
+
+    p = Path(path)
+    return p.parent if p.suffix == ".zip" else p
+
+
 def add_evaluate_parser(sub) -> None:
-    p = sub.add_parser("evaluate", help="compare all agents on held-out randomised rotors")
-    p.add_argument("--env", required=True, choices=ENV_IDS)
+    p = sub.add_parser("evaluate", help="compare agents (baselines, saved models) on held-out randomised rotors")
+    p.add_argument("--env", choices=ENV_IDS, help="the environment (default: the --model's)")
+    p.add_argument("--model", action="append", metavar="PATH",
+                   help="a model saved by 'rotor-id train' (its --out folder or model.zip), evaluated beside the "
+                        "baselines (repeatable)")
+    p.add_argument("--baselines", action=argparse.BooleanOptionalAction, default=True,
+                   help="evaluate the baselines and the committed policies too (default on)")
     p.add_argument("--episodes", type=int, default=50)
-    p.add_argument("--json", action="store_true", help="print {'agents': {name: metrics}} as JSON")
+    p.add_argument("--seed", type=int, default=None, metavar="SEED0",
+                   help="the rotors are drawn with seeds SEED0, SEED0+1, ... (default 50000, never used in training)")
+    p.add_argument("--json", action="store_true",
+                   help="print {env, episodes, seeds, agents: {name: means}, statistics: {name: {metric: {mean, std, "
+                        "ci95}}}, versions} as JSON")
     p.set_defaults(func=_cmd_evaluate)

@@ -21,7 +21,8 @@ from .baselines import ConstantRamp, Fastest, ModelBasedBalancer, ModelBasedRunU
 from .oracle import RunUpOracle
 from .training import TrainedPolicy, make_env
 
-__all__ = ["EVAL_SEED0", "default_agents", "evaluate", "policy_folder", "run_episode"]
+__all__ = ["EVAL_SEED0", "METRICS", "default_agents", "evaluate", "load_model", "policy_folder", "run_episode",
+           "statistics", "versions"]
 
 EVAL_SEED0 = 50_000
 RUN_UP = "rotor_env/RotorRunUp-v0"
@@ -90,14 +91,82 @@ def default_agents(env_id: str, env, with_sb3: bool = True) -> dict[str, tuple[o
     return agents
 
 
-def evaluate(env_id: str, episodes: int = 50, agents: dict | None = None, progress: bool = False) -> dict:
-    """``{"agents": {name: metrics}}`` over ``episodes`` held-out rotors."""
+METRICS = ("peak_amplitude", "rms_amplitude", "time_to_speed", "effort", "rub_rate", "return")
+
+
+def statistics(values) -> dict:
+    """Mean, sample standard deviation and the 95 % Student-t interval of the mean
+    (``std``/``ci95`` are None for a single episode)."""
+    from scipy import stats
+
+    x = np.asarray(values, dtype=float)
+    n = len(x)
+    mean = float(np.mean(x))
+    if n < 2:
+        return {"mean": mean, "std": None, "ci95": None, "n": n}
+    std = float(np.std(x, ddof=1))
+    half = float(stats.t.ppf(0.975, n - 1)) * std / math.sqrt(n)
+    return {"mean": mean, "std": std, "ci95": [mean - half, mean + half], "n": n}
+
+
+def load_model(path: str | Path, env_id: str | None = None, name: str | None = None) -> tuple[str, object, bool]:
+    """A model saved by ``rotor-id train`` (its folder, or the ``model.zip`` in it) as an
+    agent: ``(name, policy, sees the identifier)``; refuses one trained on another env."""
+    import json
+
+    folder = Path(path)
+    if folder.is_file() and folder.suffix == ".zip":
+        folder = folder.parent
+    meta_path = folder / "run.json"
+    if not meta_path.is_file() or not (folder / "model.zip").is_file():
+        raise ValueError(f"--model {path}: expected a folder written by 'rotor-id train' (model.zip, run.json, "
+                         "vecnormalize.npz)")
+    meta = json.loads(meta_path.read_text())
+    if env_id is not None and meta.get("env") != env_id:
+        raise ValueError(f"--model {path} was trained on {meta.get('env')}, not {env_id}")
+    name = name or f"model:{folder.resolve().name}"
+    return name, TrainedPolicy.load(folder, name), bool(meta.get("identifier", True))
+
+
+def versions() -> dict:
+    """The versions an evaluation ran with (for its JSON)."""
+    import platform
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for dist in ("rotor-id", "numpy", "numba", "gymnasium", "stable-baselines3", "torch", "ray"):
+        try:
+            out[dist] = version(dist)
+        except PackageNotFoundError:
+            pass
+    return out
+
+
+def evaluate(env_id: str, episodes: int = 50, agents: dict | None = None, progress: bool = False,
+             models: list | None = None, baselines: bool = True, seed0: int = EVAL_SEED0) -> dict:
+    """Every agent over ``episodes`` held-out rotors (seeds ``seed0 + i``).
+
+    Returns ``{"env", "episodes", "seeds", "agents": {name: {metric: mean}},
+    "statistics": {name: {metric: {"mean", "std", "ci95", "n"}}}, "versions"}``.
+    ``models``: folders of models saved by ``rotor-id train``, evaluated beside the
+    baselines (``baselines=False``: alone).
+    """
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
+    loaded = [load_model(m, env_id) for m in (models or [])]
     env = make_env(env_id, identifier=True)
     plain_dim = env.unwrapped.observation_space.shape[0]
-    agents = default_agents(env_id, env) if agents is None else agents
-    results = {}
+    if agents is None:
+        agents = default_agents(env_id, env) if baselines else {}
+    else:
+        agents = dict(agents)
+    for name, policy, ident in loaded:
+        while name in agents:
+            name += "'"
+        agents[name] = (policy, ident)
+    if not agents:
+        raise ValueError("nothing to evaluate: give --model or keep the baselines")
+    results, stats = {}, {}
     pbar = None
     if progress:
         from tqdm.auto import tqdm
@@ -106,27 +175,32 @@ def evaluate(env_id: str, episodes: int = 50, agents: dict | None = None, progre
     for name, (agent, sees_identifier) in agents.items():
         rows = []
         for i in range(episodes):
-            rows.append(run_episode(env, agent, EVAL_SEED0 + i, None if sees_identifier else plain_dim))
+            rows.append(run_episode(env, agent, seed0 + i, None if sees_identifier else plain_dim))
             if pbar is not None:
                 pbar.update(1)
-        results[name] = {
-            "peak_amplitude": float(np.mean([r["peak_amplitude"] for r in rows])),
-            "rms_amplitude": float(np.mean([r["rms_amplitude"] for r in rows])),
-            "time_to_speed": float(np.mean([r["time_to_speed"] for r in rows])),
-            "effort": float(np.mean([r["effort"] for r in rows])),
-            "rub_rate": float(np.mean([r["rub"] for r in rows])),
-            "return": float(np.mean([r["return"] for r in rows])),
-        }
+        per = {k: [float(r["rub"] if k == "rub_rate" else r[k]) for r in rows] for k in METRICS}
+        stats[name] = {k: statistics(v) for k, v in per.items()}
+        results[name] = {k: stats[name][k]["mean"] for k in METRICS}
     if pbar is not None:
         pbar.close()
     env.close()
-    return {"env": env_id, "episodes": episodes, "agents": results}
+    return {"env": env_id, "episodes": episodes, "seeds": [seed0 + i for i in range(episodes)],
+            "agents": results, "statistics": stats,
+            "interval": "95 % Student-t interval of the mean over the episodes", "versions": versions()}
 
 
 def format_table(result: dict) -> str:
-    keys = ("peak_amplitude", "rms_amplitude", "time_to_speed", "effort", "rub_rate", "return")
+    """Means; with the statistics, ``mean ± half-width of the 95 % interval``."""
+    keys = METRICS
+    stats = result.get("statistics", {})
     lines = ["| agent | " + " | ".join(keys) + " |", "|---" * (len(keys) + 1) + "|"]
+
+    def cell(name, k, v):
+        if not math.isfinite(v):
+            return "—"
+        ci = stats.get(name, {}).get(k, {}).get("ci95")
+        return f"{v:.4g} ± {(ci[1] - ci[0]) / 2:.2g}" if ci else f"{v:.4g}"
+
     for name, m in result["agents"].items():
-        lines.append(f"| {name} | " + " | ".join(
-            f"{m[k]:.4g}" if math.isfinite(m[k]) else "—" for k in keys) + " |")
+        lines.append(f"| {name} | " + " | ".join(cell(name, k, m[k]) for k in keys) + " |")
     return "\n".join(lines)

@@ -149,6 +149,50 @@ class TrainedPolicy:
                        features, residual)
 
 
+def _has_tensorboard() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("tensorboard") is not None
+
+
+def progress_lines(total_steps: int, every_s: float = 10.0, stream=None, eval_callback=None):
+    """An SB3 callback printing one progress line every ``every_s`` seconds (at the end of a
+    rollout) and one at the end: what ``rotor-id train`` shows when not in a terminal."""
+    import time
+
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class ProgressLines(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.t0 = self.last = time.perf_counter()
+            self.start_steps = self.num_timesteps
+
+        def _on_step(self) -> bool:
+            return True
+
+        def _line(self, final: bool = False) -> None:
+            done = self.num_timesteps - self.start_steps
+            elapsed = time.perf_counter() - self.t0
+            rate = done / elapsed if elapsed > 0 else 0.0
+            left = f", ~{(total_steps - done) / rate:.0f} s left" if rate > 0 and not final else ""
+            r = getattr(eval_callback, "last_mean_reward", None)
+            evs = f", last eval mean reward {r:.4g}" if r is not None and np.isfinite(r) else ""
+            word = "done" if final else "steps"
+            print(f"rotor-id train: {done}/{total_steps} {word} ({100 * done / max(total_steps, 1):.0f} %), "
+                  f"{elapsed:.0f} s, {rate:.0f} steps/s{left}{evs}", file=stream or sys.stderr, flush=True)
+
+        def _on_rollout_end(self) -> None:
+            now = time.perf_counter()
+            if now - self.last >= every_s and self.num_timesteps - self.start_steps < total_steps:
+                self.last = now
+                self._line()
+
+        def _on_training_end(self) -> None:
+            self._line(final=True)
+
+    return ProgressLines()
+
+
 def train(
     env_id: str,
     algo: str = "ppo",
@@ -165,8 +209,14 @@ def train(
     force: bool = False,
     model_features: str = "compact",
     residual: float = 0.0,
+    log_every_s: float = 10.0,
 ) -> Path:
     """Train, evaluate during training, save the model and its normalisation statistics.
+
+    Logs go to ``out/logs/``: ``progress.csv`` (SB3's logger: rollout, train and eval
+    statistics) and TensorBoard event files when ``tensorboard`` is installed.  Without a
+    progress bar (``progress`` false, or not in a terminal) a line every ``log_every_s``
+    seconds tells the steps done, the rate, the time left and the last evaluation.
 
     ``model_features`` (with ``identifier``; see :func:`make_env`): the policy sees the
     identified model as features (:class:`agents.features.ModelFeatures`), recorded in
@@ -175,7 +225,8 @@ def train(
     model-based baseline (:mod:`agents.residual`), also recorded in ``run.json``.
     """
     from stable_baselines3 import PPO, SAC
-    from stable_baselines3.common.callbacks import EvalCallback
+    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+    from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import VecNormalize
 
     if algo not in ALGOS:
@@ -203,7 +254,10 @@ def train(
     # EvalCallback syncs the normalisation statistics from the training env
     if progress is None:
         progress = sys.stderr.isatty()
-    model.learn(total_timesteps=int(steps), callback=callback, progress_bar=bool(progress))
+    formats = ["csv", "tensorboard"] if _has_tensorboard() else ["csv"]
+    model.set_logger(configure(str(out / "logs"), formats))
+    callbacks = CallbackList([callback] if progress else [callback, progress_lines(int(steps), log_every_s, eval_callback=callback)])
+    model.learn(total_timesteps=int(steps), callback=callbacks, progress_bar=bool(progress))
     model.save(out / "model.zip")
     save_vecnormalize(venv, out / "vecnormalize.npz")
     run = {
@@ -213,6 +267,7 @@ def train(
         f"{'--identifier' if identifier else '--no-identifier'}{f' --model-features {model_features}' if identifier else ''}"
         f"{f' --residual {residual}' if residual else ''} --seed {seed} --out {out}",
         "eval_mean_reward": float(callback.last_mean_reward) if callback.last_mean_reward > -np.inf else None,
+        "logs": {"folder": "logs", "formats": formats},
         "features": venv.venv.envs[0].get_wrapper_attr("features").to_json() if model_features != "none" else None,
         "residual": venv.venv.envs[0].get_wrapper_attr("residual").to_json() if residual else None,
     }
