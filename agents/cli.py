@@ -16,7 +16,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     command = "rotor-id " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["train"] else None
     out = train(args.env, args.algo, args.steps, identifier=args.identifier, seed=args.seed, out=args.out,
                 hyperparams=args.hyperparams, eval_freq=args.eval_freq, command=command, force=args.force,
-                model_features=args.model_features, residual=args.residual)
+                model_features=args.model_features, residual=args.residual, vec_env=args.vec_env)
     print(f"saved {out}/model.zip, {out}/vecnormalize.npz and {out}/run.json")
     return 0
 
@@ -40,6 +40,9 @@ def add_train_parser(sub) -> None:
     p.add_argument("--hyperparams", metavar="FILE.yml", help="hyper-parameter table (default: agents/hyperparams.yml)")
     p.add_argument("--eval-freq", type=int, default=10_000, help="evaluate every N steps")
     p.add_argument("--force", action="store_true", help="overwrite a non-empty --out folder")
+    p.add_argument("--vec-env", choices=("dummy", "numba"), default="dummy",
+                   help="'numba': with --no-identifier, step all sub-envs in one compiled call (the numba vector env "
+                        "through an SB3 VecEnv adapter) instead of DummyVecEnv")
     p.set_defaults(func=_cmd_train)
 
 

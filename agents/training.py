@@ -75,10 +75,22 @@ def make_env(env_id: str, identifier: bool, model_features: str = "none", residu
     return env
 
 
+VEC_ENVS = ("dummy", "numba")
+
+
 def _vec_env(env_id: str, identifier: bool, n_envs: int, seed: int, model_features: str = "none",
-             residual: float = 0.0):
+             residual: float = 0.0, vec_env: str = "dummy"):
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
+
+    if vec_env == "numba":  # every sub-env in one compiled call (agents.vec_env)
+        if identifier:
+            raise ValueError("--vec-env numba steps the bare env: use it with --no-identifier")
+        from .vec_env import make_numba_vec_env
+
+        return make_numba_vec_env(env_id, n_envs, seed=seed)
+    if vec_env != "dummy":
+        raise ValueError(f"vec_env must be one of {VEC_ENVS}, got {vec_env!r}")
 
     def factory(i):
         def _make():
@@ -210,6 +222,7 @@ def train(
     model_features: str = "compact",
     residual: float = 0.0,
     log_every_s: float = 10.0,
+    vec_env: str = "dummy",
 ) -> Path:
     """Train, evaluate during training, save the model and its normalisation statistics.
 
@@ -243,8 +256,8 @@ def train(
     if model_features not in FEATURES:
         raise ValueError(f"model_features must be one of {FEATURES}, got {model_features!r}")
     model_features = model_features if identifier else "none"
-    venv = VecNormalize(_vec_env(env_id, identifier, n_envs, seed, model_features, residual), norm_obs=True,
-                        norm_reward=True)
+    venv = VecNormalize(_vec_env(env_id, identifier, n_envs, seed, model_features, residual, vec_env),
+                        norm_obs=True, norm_reward=True)
     eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed, model_features, residual),
                             norm_obs=True, norm_reward=False, training=False)
     cls = {"ppo": PPO, "sac": SAC}[algo]
@@ -268,6 +281,7 @@ def train(
         f"{f' --residual {residual}' if residual else ''} --seed {seed} --out {out}",
         "eval_mean_reward": float(callback.last_mean_reward) if callback.last_mean_reward > -np.inf else None,
         "logs": {"folder": "logs", "formats": formats},
+        "vec_env": vec_env,
         "features": venv.venv.envs[0].get_wrapper_attr("features").to_json() if model_features != "none" else None,
         "residual": venv.venv.envs[0].get_wrapper_attr("residual").to_json() if residual else None,
     }
