@@ -195,6 +195,17 @@ def test_phase_conventions_lag_and_lead():
         assert np.allclose(from_phase(a, p, conv), X)
 
 
+def test_table_without_time_in_any_order_is_sorted_by_speed(tmp_path):
+    path = tmp_path / "bode.csv"
+    rpm = np.array([500.0, 700.0, 600.0, 600.0, 900.0, 800.0, 1000.0, 1100.0, 1200.0, 1300.0])
+    path.write_text("rpm,amp,phase_deg\n" + "\n".join(f"{r},{r / 100},{r / 10}" for r in rpm) + "\n")
+    table = load_vector_table(path)
+    assert np.all(np.diff(table.rpm) >= 0)
+    amp, lag = to_phase(table.vectors[1][:, 0], "lag")
+    assert np.allclose(amp, table.rpm / 100) and np.allclose(lag, table.rpm / 10)
+    assert any("sorted" in n for n in table.notes)
+
+
 def test_vector_table_errors_name_file_column_and_line(tmp_path):
     path = tmp_path / "bode.csv"
     rows = "\n".join(f"{300 + 50 * k},{1.0 + k},{10.0 * k}" for k in range(12))

@@ -284,12 +284,14 @@ def load_vector_table(
             raise VectorTableError(f"{path}, line {lines[r]}, column {header[t_idx]!r}: time {t[r]!r} does not "
                                    f"increase (previous {t[r - 1]!r})")
     else:
-        order = np.argsort(speed, kind="stable")
-        if not (np.all(np.diff(speed) > 0) or np.all(np.diff(speed) < 0)):
-            raise VectorTableError(f"{path}: without a time column the speeds must rise (start-up) or fall "
-                                   "(coast-down) row by row")
-        del order
         notes.append("no time column: the synchronous response is taken as quasi-steady")
+        if not (np.all(np.diff(speed) > 0) or np.all(np.diff(speed) < 0)):
+            # quasi-steady rows stand on their own: order them by speed (the noise floor and
+            # the start values read neighbouring rows)
+            order = np.argsort(speed, kind="stable")
+            data, lines = data[order], lines[order]
+            speed = speed[order]
+            notes.append("rows sorted by speed (the table's speeds neither rise nor fall throughout)")
     names = tuple(probes)
     vectors = {}
     for n in sorted({n for v in probes.values() for n in v}):

@@ -75,7 +75,11 @@ class RigRecord:
             names = tuple(p.name for p in self.rig.probes)
             X = np.column_stack([self.readings[n] - self.readings[n].mean() for n in names])
             angles, unit = np.array([p.angle for p in self.rig.probes]), self.rig.amp_unit
-        tr = order_track(self.t, X, self.phi, orders, revolutions, upsample=4)
+        # cubic upsampling only where a revolution holds few samples (memory: a 50 kHz record
+        # is already fine, and four times its length would not fit)
+        per_turn = 2 * math.pi / max(float(np.max(np.diff(self.phi))), 1e-12)
+        up = int(np.clip(math.ceil(64.0 / per_turn), 1, 4))
+        tr = order_track(self.t, X, self.phi, orders, revolutions, upsample=up)
         return VectorTable(speed=tr.speed, t=tr.t, probes=names, vectors=tr.vectors, amp_unit=unit,
                            angles=angles, source=self.source, notes=self.notes)
 
