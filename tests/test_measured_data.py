@@ -161,6 +161,16 @@ def test_missing_or_extra_pulse_is_a_clear_error(kw, word):
     assert word in str(err.value) and "run.csv, column 'kp'" in str(err.value) and "t = " in str(err.value)
 
 
+def test_a_start_from_rest_is_not_a_missing_pulse():
+    t = np.arange(0.0, 4.0, 1 / 20000)
+    phi = 0.5 * 60.0 * t * t  # from rest: the first revolutions' periods shrink fast
+    kp = np.where((phi / (2 * math.pi)) % 1.0 < 0.05, -5.0, 0.0)
+    edges = pulse_edges(t, kp)
+    # the pulse at t = 0 has no edge before it: the k-th edge found is turn k + 1, at sqrt(4 pi k / 60)
+    assert len(edges) == int(phi[-1] / (2 * math.pi))
+    assert np.allclose(edges, np.sqrt(4 * math.pi * np.arange(1, len(edges) + 1) / 60.0), atol=1e-4)
+
+
 def test_constant_keyphasor_is_a_clear_error():
     with pytest.raises(KeyphasorError, match="constant"):
         pulse_edges(np.arange(100.0), np.zeros(100))
