@@ -191,6 +191,16 @@ def _finite(v):
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
 
 
+def _flat(values: dict, prefix: str = ""):
+    """``(name, number)`` pairs; nested ``{effect: {parameter: value}}`` (1X tables) as
+    ``effect.parameter``."""
+    for k, v in values.items():
+        if isinstance(v, dict):
+            yield from _flat(v, f"{prefix}{k}.")
+        elif not isinstance(v, list):
+            yield f"{prefix}{k}", v
+
+
 def flat_row(record: dict) -> dict:
     """One row of ``results.parquet`` from a recording's JSON (see :func:`_record`)."""
     d = record.get("diagnosis") or {}
@@ -205,8 +215,8 @@ def flat_row(record: dict) -> dict:
         "verdict": d.get("verdict"),
         "missing": [str(m) for m in d.get("missing") or []],
         "onsets": [{"effect": str(k), "t": _finite(v)} for k, v in onset.items()],
-        "coefficients": [{"name": str(k), "value": _finite(v), "standard_error": _finite(ses.get(k))}
-                         for k, v in coefs.items() if not isinstance(v, (dict, list))],
+        "coefficients": [{"name": name, "value": _finite(v), "standard_error": _finite(ses.get(name))}
+                         for name, v in _flat(coefs)],
         "rms_before": _finite(d.get("rms_before")),
         "rms_after": _finite(d.get("rms_after")),
         "noise_floor": _finite(d.get("noise_floor")),

@@ -245,6 +245,13 @@ def _integrate(accel, *args):
     return bound.integrate_bound(*args) if bound is not None else integrate(accel, *args)
 
 
+def call_integrate_profile(accel, *args):
+    """:func:`integrate_profile` from Python, through the cached bound kernel when there is
+    one (``accel`` from :func:`compile_accel`): no compilation in a second process."""
+    bound = _BOUND.get(id(accel))
+    return bound.integrate_profile_bound(*args) if bound is not None else integrate_profile(accel, *args)
+
+
 # ------------------------------------------------------------------------ kernels
 @njit(inline="always")
 def _derivs(accel, tau, thx, thy, wx, wy, phi0, phid0, a, ip, coef, h, eta, My, Mx):
@@ -553,9 +560,8 @@ def free_run(
     done = len(t)
     for k0 in range(0, len(t) - 1, per):
         k1 = min(len(t), k0 + per + 1)
-        bound = _BOUND.get(id(sim.accel))
-        args = (state, t[k0:k1], phi[k0:k1], phi_dot[k0:k1], params.ip, coef, h, every, out[k0:k1])
-        got = bound.integrate_profile_bound(*args) if bound is not None else integrate_profile(sim.accel, *args)
+        got = call_integrate_profile(sim.accel, state, t[k0:k1], phi[k0:k1], phi_dot[k0:k1], params.ip, coef, h,
+                                     every, out[k0:k1])
         if got < k1 - k0:
             done = k0 + got
             break

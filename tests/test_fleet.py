@@ -192,3 +192,17 @@ def test_cached_kernel_is_the_in_memory_kernel_and_hits_the_cache_in_a_new_proce
     np.testing.assert_array_equal(first["x"], off["x"])
     np.testing.assert_array_equal(second["x"], off["x"])
     assert any((tmp_path / "k" / "kernels").glob("rotor_id_kernel_*.py"))
+
+
+def test_row_of_a_vector_table_diagnosis_keeps_criticals_and_nested_values():
+    from rotor_env.fleet import flat_row
+
+    record = {"recording": "t1", "source": "t1.csv", "status": "ok", "error": None, "seconds": 1.0, "diagnosis": {
+        "kind": "vectors", "verdict": "explained", "missing": [], "rms_before": 0.5, "rms_after": 0.4,
+        "criticals": [{"rpm": 1649.7, "damping_ratio": 0.02}],
+        "physical": {"viscous_damping": {"c": 0.04}, "unbalance": {"tau": 5.0, "beta": -1e-4}}}}
+    row = flat_row(record)
+    assert row["kind"] == "vectors" and row["criticals"] == [{"rpm": 1649.7, "damping_ratio": 0.02}]
+    assert [(c["name"], c["value"], c["standard_error"]) for c in row["coefficients"]] == [
+        ("viscous_damping.c", 0.04, None), ("unbalance.tau", 5.0, None), ("unbalance.beta", -1e-4, None)]
+    assert row["fit_percent_after"] is None and row["rms_after"] == 0.4
