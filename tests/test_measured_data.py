@@ -259,6 +259,16 @@ def test_critical_speed_and_damping_ratio_within_one_percent(rig, natural_rpm, c
     assert out["method"] == "transient"
 
 
+def test_a_run_below_the_critical_says_so_and_extrapolates_with_its_error(rig):
+    table = _table(rig, _params(), rpm=(300.0, 1200.0), seed=2)
+    out = diagnose_vectors(table).to_dict()
+    assert out["criticals"] == []
+    assert any("no critical speed within the run" in n for n in out["notes"])
+    se = out["natural_frequency_rpm_standard_error"]
+    assert 0 < se < 50
+    assert abs(out["natural_frequency_rpm"] - 1650.0) < 4 * se
+
+
 def test_a_steady_state_fit_would_misread_the_fast_start_up(rig):
     """The quasi-steady model at 230 rpm/s puts the critical several per cent off: the
     transient model is what gets it within 1 %."""

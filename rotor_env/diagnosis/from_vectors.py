@@ -177,6 +177,16 @@ class VectorDiagnosis:
     def verdict(self) -> str:
         return verdict_of(bool(self.missing), self.after.rms / self.noise_floor if self.noise_floor > 0 else math.inf)
 
+    def natural_frequency_se(self) -> float | None:
+        """HAC standard error of the natural frequency (rpm), from the fit's sandwich covariance."""
+        J, resid, per = _time_major(self.after)
+        try:
+            cov = hac_covariance(J, resid, rows_per_time=per)
+        except (np.linalg.LinAlgError, ValueError):
+            return None
+        var = float(cov[0, 0])
+        return float(math.sqrt(var) * self.after.w_ref / SPEED_UNITS["rpm"]) if var >= 0 else None
+
     def unbalance(self, mass_kg: float | None = None) -> dict | None:
         """The identified unbalance: eccentricity in the table's unit and its angle.
 
@@ -237,6 +247,7 @@ class VectorDiagnosis:
             "rms_ratio_before": self.before.rms / self.noise_floor if self.noise_floor > 0 else None,
             "rms_ratio_after": ratio,
             "natural_frequency_rpm": self.after.w_ref / SPEED_UNITS["rpm"],
+            "natural_frequency_rpm_standard_error": self.natural_frequency_se(),
             "physical": _jsonable(self.after.values()),
             "candidates": self.tested,
             "rejected": self.rejected,
@@ -491,6 +502,10 @@ def diagnose_vectors(
         remaining = [c for c in remaining if c != best[0]]
         # an effect rejected earlier may be accepted once another is in: keep only the last reasons
         rejected = [r for r in rejected if r["effect"] in remaining]
+    if not current.criticals:
+        notes.append(f"no critical speed within the run ({table.rpm.min():.0f}-{table.rpm.max():.0f} rpm): the "
+                     f"natural frequency ({current.w_ref / SPEED_UNITS['rpm']:.0f} rpm) is extrapolated; see its "
+                     "standard error")
     if current.rms > FLOOR_RATIO * floor:
         notes.append("what is left may act in the rotating frame (a crack: asymmetry, breathing) or be non-linear "
                      "(a rub, dry friction): the 1X vectors cannot carry those; diagnose the waveforms (--rig)")
