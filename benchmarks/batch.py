@@ -4,7 +4,8 @@ Simulates ``--n`` small run-ups (different seeds; every third one cracks), then 
 each in a fresh process from the command line to the last result (interpreter start,
 imports, numba's cached kernels, the diagnoses):
 
-* ``sequential``: one process, ``for f in files: diagnose_file(f)``;
+* ``sequential``: one process, ``for f in files: diagnose_file(f)``; again with one BLAS/OpenMP
+  thread (``OMP_NUM_THREADS=1``, what Ray gives a task of one CPU);
 * ``ray W``: ``rotor-id batch FOLDER --out RESULTS --workers W`` for each ``--workers W``
   (Ray's local mode), or on the cluster at ``--address``.
 
@@ -12,7 +13,7 @@ Prints a Markdown table: wall seconds, recordings per second, the speed-up over 
 sequential loop, and whether every verdict and missing-effect list equals the sequential
 one.  The Ray overhead on one worker is the ``ray 1`` row's time over the sequential.
 
-    python benchmarks/batch.py [--n 200] [--workers 1,2] [--address ADDR]
+    python benchmarks/batch.py [--n 200] [--workers 1,2] [--address ADDR] [--runs seq,seq1,ray]
 """
 
 from __future__ import annotations
@@ -54,9 +55,9 @@ def sequential(folder: str, out: str) -> None:
     Path(out).write_text(json.dumps(rows))
 
 
-def timed(cmd: list[str]) -> float:
+def timed(cmd: list[str], env: dict | None = None) -> float:
     t = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
     return time.perf_counter() - t
 
 
@@ -65,6 +66,8 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=200, help="recordings (default 200)")
     ap.add_argument("--workers", default="1,2", help="comma-separated worker counts (default 1,2)")
     ap.add_argument("--address", help="a Ray cluster to run the batch on (the workers are then its CPUs)")
+    ap.add_argument("--runs", default="seq,seq1,ray", help="which runs: seq (the loop), seq1 (the loop with "
+                    "OMP_NUM_THREADS=1), ray (default all)")
     ap.add_argument("--sequential-only", metavar="FOLDER:OUT", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.sequential_only:
@@ -78,12 +81,25 @@ def main() -> None:
     make_fleet(fleet, args.n)
     print(f"{args.n} recordings of 4001 samples (t 0-80, run-up 0.04; every third cracks) simulated in "
           f"{time.perf_counter() - t:.1f} s; {os.cpu_count()} CPUs\n", flush=True)
-    truth_path = work / "sequential.json"
-    t_seq = timed([sys.executable, __file__, "--sequential-only", f"{fleet}:{truth_path}"])
-    truth = json.loads(truth_path.read_text())
+    which = set(args.runs.split(","))
     print("| run | wall (s) | recordings/s | speed-up vs sequential | same verdicts |")
     print("|---|---|---|---|---|")
-    print(f"| sequential loop | {t_seq:.1f} | {args.n / t_seq:.2f} | ×1.00 | — |", flush=True)
+    truth, t_seq = None, None
+    for tag, name, env in (("seq", "sequential loop", None),
+                           ("seq1", "sequential loop, OMP_NUM_THREADS=1", dict(os.environ, OMP_NUM_THREADS="1"))):
+        if tag not in which:
+            continue
+        path = work / f"{tag}.json"
+        wall = timed([sys.executable, __file__, "--sequential-only", f"{fleet}:{path}"], env)
+        rows = json.loads(path.read_text())
+        same = "—" if truth is None else ("yes" if rows == truth else "NO")
+        truth = truth or rows
+        t_seq = t_seq or wall
+        print(f"| {name} | {wall:.1f} | {args.n / wall:.2f} | ×{t_seq / wall:.2f} | {same} |", flush=True)
+    if "ray" not in which:
+        return
+    if truth is None:
+        raise SystemExit("--runs: the Ray runs are compared with a sequential one (seq or seq1)")
     counts = [int(w) for w in args.workers.split(",")]
     runs = [("cluster", None)] if args.address else [(f"ray, {w} worker{'s' * (w > 1)}", w) for w in counts]
     for name, w in runs:

@@ -19,6 +19,7 @@ A recording that cannot be read or diagnosed gets an error row; the batch goes o
 from __future__ import annotations
 
 import argparse
+import contextlib
 import glob
 import json
 import math
@@ -53,6 +54,17 @@ class Recording:
     path: str
     column: str = ""
     value: str = ""  # JSON of the id value (its type kept: 7 and "7" differ)
+
+    @property
+    def key(self) -> str:
+        """What a checkpoint is matched on: the real path (``./a`` and ``a`` are one file)
+        and, for a file of its own, its size and time stamp (a file replaced is new)."""
+        stamp = ""
+        if not self.column:
+            with contextlib.suppress(OSError):
+                st = os.stat(self.path)
+                stamp = f"{st.st_size}:{st.st_mtime_ns}"
+        return f"{os.path.realpath(self.path)}|{self.column}|{self.value}|{stamp}"
 
     @property
     def source(self) -> str:
@@ -161,7 +173,7 @@ def diagnose_recording(rec: Recording | dict, options: dict) -> dict:
     if isinstance(rec, dict):
         rec = Recording(**{k: rec[k] for k in ("id", "path", "column", "value")})
     t0 = time.perf_counter()
-    row = {"recording": rec.id, "source": rec.source, "ok": False, "result_json": "", "error": "",
+    row = {"recording": rec.id, "source": rec.source, "key": rec.key, "ok": False, "result_json": "", "error": "",
            "seconds": 0.0, "report": b""}
     try:
         with tempfile.TemporaryDirectory(prefix="rotor-id-batch-") as tmp:
@@ -300,7 +312,8 @@ def _atomic_write(path: Path, data: bytes) -> None:
 
 
 def _record(row: dict) -> dict:
-    return {"recording": row["recording"], "source": row["source"], "status": "ok" if row["ok"] else "error",
+    return {"recording": row["recording"], "source": row["source"], "key": row["key"],
+            "status": "ok" if row["ok"] else "error",
             "error": row["error"] or None, "seconds": row["seconds"],
             "diagnosis": json.loads(row["result_json"]) if row["ok"] else None}
 
@@ -358,7 +371,7 @@ def run_batch(inputs: list[str], out: str | Path, *, workers: int = 1, address: 
             record = json.loads(path.read_text())
         except (OSError, json.JSONDecodeError):
             return None  # a torn checkpoint: diagnose again
-        if record.get("source") != rec.source or (retry_errors and record.get("status") != "ok"):
+        if record.get("key") != rec.key or (retry_errors and record.get("status") != "ok"):
             return None
         return record
 

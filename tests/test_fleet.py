@@ -105,8 +105,13 @@ def test_rerun_skips_done_recordings(fleet, batch, local_ray):
     said = json.loads(buf.getvalue())
     assert said["done"] == 0 and said["skipped"] == 3 and said["summary"]["ok"] == 2
     assert (out / "recordings" / "m1.json").stat().st_mtime_ns == stamp
-    # a lost checkpoint is done again, and only that one; --retry-errors re-runs the failed one
-    (out / "recordings" / "m1.json").unlink()
+    # the same files named by another path are the same recordings
+    other = run_batch([os.path.relpath(fleet)], out, workers=2, progress=False, log=lambda m: None)
+    assert other["done"] == 0 and other["skipped"] == 3
+    # a file replaced since (a new time stamp) is done again, and only that one; --retry-errors
+    # re-runs the failed one
+    st = (fleet / "m1.csv").stat()
+    os.utime(fleet / "m1.csv", ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
     again = run_batch([str(fleet)], out, workers=2, progress=False, log=lambda m: None)
     assert again["done"] == 1 and again["skipped"] == 2
     retry = run_batch([str(fleet)], out, workers=2, retry_errors=True, progress=False, log=lambda m: None)
