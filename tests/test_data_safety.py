@@ -396,3 +396,16 @@ def test_json_state_meta_is_kept(tmp_path):
     with np.load(path) as data:
         assert json.loads(str(data["meta"]))["groups"] == {"ab": ["a", "b"]}
     assert RecursiveQR.load(path).groups == {"ab": ("a", "b")}
+
+
+def test_a_candidate_with_no_physical_rotor_is_turned_down_not_a_crash():
+    """A fitted breathing term without a mean crack stiffness has infinite depth: its free run
+    cannot be built; the diagnosis turns the candidate down instead of raising (seed 43 of a
+    fleet batch did)."""
+    from rotor_env.diagnosis import diagnose
+    from rotor_env.simulator import RunUp
+
+    meas = simulate(RotorParams().replace(h=0.0), t_end=80.0, dt=0.02, run_up=RunUp(rate=0.04),
+                    noise=5e-4, seed=43)
+    result = diagnose(meas)
+    assert result.verdict in ("explained", "explained_after_adding", "partly_explained", "unexplained")

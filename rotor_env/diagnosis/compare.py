@@ -341,7 +341,12 @@ def _free_run(comp: Comparison, data: _Data, known: dict) -> None:
             # before its onset an effect is absent, or has its own values if it changes
             physical = {**comp.physical, **{k: v for k, v in comp.physical_before.items()}} \
                 if pending & set(comp.splits) else comp.physical
-            params = _model_params(comp.model, physical, data.ip, known, pending - set(comp.splits))
+            try:
+                params = _model_params(comp.model, physical, data.ip, known, pending - set(comp.splits))
+            except ValueError:
+                # coefficients no physical rotor has (a breathing term without a mean crack
+                # stiffness: infinite depth): the model cannot be run, it is not a candidate
+                raise SimulationError("the fitted coefficients are not a physical rotor") from None
             # compiled once for the whole registry: every candidate model shares the kernel
             seg = free_run(params, m.t[a : b + 1], m.phi[a : b + 1], m.phi_dot[a : b + 1], state,
                            compiled_for=tuple(EFFECTS))
