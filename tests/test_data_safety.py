@@ -101,7 +101,10 @@ def test_free_run_in_chunks_equals_one_call(run, monkeypatch):
 def test_long_free_run_hears_ctrl_c():
     """SIGINT in the middle of a long compiled free run ends it within a few seconds."""
     code = textwrap.dedent("""
-        import sys, time
+        import signal, sys, time
+        # a process started in the background by a non-interactive shell inherits SIGINT
+        # ignored; the test is about the loop hearing Ctrl-C, so give it Python's handler
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         import numpy as np
         from rotor_env.params import RotorParams
         from rotor_env.simulator import free_run
