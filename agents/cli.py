@@ -14,16 +14,44 @@ def _cmd_train(args: argparse.Namespace) -> int:
     from .training import train
 
     command = "rotor-id " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["train"] else None
+    if args.backend == "rllib":
+        if args.algo != "ppo":
+            print("rotor-id train: error: --backend rllib trains PPO (--algo ppo)", file=sys.stderr)
+            return 2
+        if args.vec_env != "dummy":
+            print("rotor-id train: error: --vec-env is SB3's; RLlib samples with its own env runners (--workers)",
+                  file=sys.stderr)
+            return 2
+        from .rllib import train_rllib
+
+        out = train_rllib(args.env, args.steps, identifier=args.identifier, seed=args.seed, out=args.out,
+                          hyperparams=args.hyperparams, command=command, force=args.force,
+                          model_features=args.model_features, residual=args.residual, workers=args.workers,
+                          address=args.address, eval_episodes=args.eval_episodes)
+        print(f"saved {out}/policy.npz, {out}/vecnormalize.npz and {out}/run.json (logs in {out}/logs)")
+        return 0
+    if args.workers or args.address:
+        print("rotor-id train: error: --workers/--address are for --backend rllib", file=sys.stderr)
+        return 2
     out = train(args.env, args.algo, args.steps, identifier=args.identifier, seed=args.seed, out=args.out,
-                hyperparams=args.hyperparams, eval_freq=args.eval_freq, command=command, force=args.force,
-                model_features=args.model_features, residual=args.residual, vec_env=args.vec_env)
+                hyperparams=args.hyperparams, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
+                command=command, force=args.force, model_features=args.model_features, residual=args.residual, vec_env=args.vec_env)
     print(f"saved {out}/model.zip, {out}/vecnormalize.npz and {out}/run.json")
     return 0
 
 
 def add_train_parser(sub) -> None:
-    p = sub.add_parser("train", help="train a Stable-Baselines3 controller (PPO or SAC)")
+    p = sub.add_parser("train", help="train a controller: Stable-Baselines3 (PPO or SAC) or RLlib (PPO)")
     p.add_argument("--env", required=True, choices=ENV_IDS)
+    p.add_argument("--backend", choices=("sb3", "rllib"), default="sb3",
+                   help="'sb3' (default): Stable-Baselines3 in this process; 'rllib': Ray RLlib's PPO, sampling in "
+                        "this process (--workers 0) or in N env-runner processes, on a cluster with --address")
+    p.add_argument("--workers", type=int, default=0, metavar="N",
+                   help="with --backend rllib: remote env runners (default 0: sample in the driver)")
+    p.add_argument("--address", metavar="ADDR", help="with --backend rllib: a Ray cluster's address (default: a "
+                   "local Ray started for the run)")
+    p.add_argument("--eval-episodes", type=int, default=5, metavar="N",
+                   help="held-out rotors evaluated during (SB3) or after (RLlib) training (default 5)")
     p.add_argument("--algo", default="ppo", choices=("ppo", "sac"))
     p.add_argument("--steps", type=int, default=100_000, help="environment steps (default 100000)")
     p.add_argument("--identifier", action=argparse.BooleanOptionalAction, default=True,

@@ -118,13 +118,19 @@ def load_model(path: str | Path, env_id: str | None = None, name: str | None = N
     if folder.is_file() and folder.suffix == ".zip":
         folder = folder.parent
     meta_path = folder / "run.json"
-    if not meta_path.is_file() or not (folder / "model.zip").is_file():
-        raise ValueError(f"--model {path}: expected a folder written by 'rotor-id train' (model.zip, run.json, "
-                         "vecnormalize.npz)")
-    meta = json.loads(meta_path.read_text())
+    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    rllib = meta.get("backend") == "rllib"
+    weights = folder / ("policy.npz" if rllib else "model.zip")
+    if not meta or not weights.is_file() or not (folder / "vecnormalize.npz").is_file():
+        raise ValueError(f"--model {path}: expected a folder written by 'rotor-id train' (run.json, vecnormalize.npz "
+                         "and model.zip, or policy.npz for --backend rllib)")
     if env_id is not None and meta.get("env") != env_id:
         raise ValueError(f"--model {path} was trained on {meta.get('env')}, not {env_id}")
     name = name or f"model:{folder.resolve().name}"
+    if rllib:
+        from .rllib import load_rllib_policy
+
+        return name, load_rllib_policy(folder, name), bool(meta.get("identifier", True))
     return name, TrainedPolicy.load(folder, name), bool(meta.get("identifier", True))
 
 
@@ -134,7 +140,7 @@ def versions() -> dict:
     from importlib.metadata import PackageNotFoundError, version
 
     out = {"python": platform.python_version()}
-    for dist in ("rotor-id", "numpy", "numba", "gymnasium", "stable-baselines3", "torch", "ray"):
+    for dist in ("rotor-id", "numpy", "numba", "gymnasium", "stable-baselines3", "torch", "ray", "tensorboardX"):
         try:
             out[dist] = version(dist)
         except PackageNotFoundError:

@@ -10,4 +10,4 @@ PIP=(.venv/bin/python -m pip install --quiet --disable-pip-version-check)
 "${PIP[@]}" --upgrade pip
 # The CPU build of PyTorch first (Stable-Baselines3 needs it); unpinned, pip would pull CUDA.
 .venv/bin/python -c "import torch" 2>/dev/null || "${PIP[@]}" torch==2.13.0
-"${PIP[@]}" -e '.[dev,agents,fleet]'
+"${PIP[@]}" -e '.[dev,agents,fleet,rllib]'
