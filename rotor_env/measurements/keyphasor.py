@@ -24,11 +24,12 @@ over 2 pi, outside [0.6, 1.6] (a start from rest, whose periods shrink fast, pas
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-__all__ = ["KeyphasorError", "pulse_edges", "spin_from_pulses"]
+__all__ = ["KeyphasorError", "KeyphasorTracker", "check_periods", "pulse_edges", "spin_from_pulses"]
 
 MIN_PULSES = 5
 #: a revolution this much longer (shorter) than its neighbours is a missed (extra) pulse
@@ -37,6 +38,50 @@ PERIOD_RATIO = (0.6, 1.6)
 
 class KeyphasorError(ValueError):
     """Keyphasor pulses that cannot give the spin angle."""
+
+
+def period_ratio(edges: np.ndarray, i: int) -> float | None:
+    """Revolution ``i`` (edge ``i`` to ``i + 1``) against its neighbours: its period times the
+    speed the line through the neighbours' speeds predicts at its middle, over 2 pi (``None``:
+    fewer than two neighbours).
+
+    A start from rest (speed growing from zero) is smooth, a missed pulse halves the speed
+    of its revolution, a double trigger doubles it in the two halves it makes -- so the
+    neighbours are the 2nd and 3rd on each side, past a partner half.  Revolution ``i``
+    needs the edges up to ``i + 4`` (or the end of the record).
+    """
+    n_periods = len(edges) - 1
+    nb = [j for j in (i - 3, i - 2, i + 2, i + 3) if 0 <= j < n_periods]
+    if len(nb) < 2:
+        return None
+    period = np.diff(edges)
+    speed = 2.0 * math.pi / period[nb]
+    mid = 0.5 * (edges[np.array(nb) + 1] + edges[nb])
+    slope, icept = np.polyfit(mid, speed, 1)
+    predicted = slope * 0.5 * (edges[i] + edges[i + 1]) + icept
+    return float(period[i] * predicted / (2.0 * math.pi)) if predicted > 0 else math.inf
+
+
+def check_periods(edges: np.ndarray, revolutions, threshold: float, *, where: str,
+                  line_of: Callable[[int], int] | None = None, first_pulse: int = 0) -> None:
+    """The missing/extra-pulse check of :func:`pulse_edges` (and :class:`KeyphasorTracker`):
+    each revolution ``i`` of ``revolutions`` whose :func:`period_ratio` is outside
+    :data:`PERIOD_RATIO` is an error naming its time and (``line_of(i)``) the file line of
+    the first sample after its leading edge.  ``first_pulse``: the number in the record of
+    ``edges[0]`` (a tracker holds a window of the edges)."""
+    for i in revolutions:
+        ratio = period_ratio(edges, i)
+        if ratio is None or PERIOD_RATIO[0] <= ratio <= PERIOD_RATIO[1]:
+            continue
+        kind = "missing pulse" if ratio > 1 else "extra pulse (double trigger or noise)"
+        line = f", line {line_of(i)}" if line_of is not None else ""
+        period = edges[i + 1] - edges[i]
+        n = first_pulse + i
+        raise KeyphasorError(
+            f"{where}{line}: irregular pulses at t = {edges[i]:.6g}: a revolution of {period:.4g} between "
+            f"pulses {n + 1} and {n + 2}, {ratio:.2f}x its neighbours ({kind}); check the threshold "
+            f"(now {threshold:g}) or the keyphasor signal"
+        )
 
 
 def pulse_edges(t: np.ndarray, signal: np.ndarray, threshold: float | None = None, *, where: str = "keyphasor",
@@ -61,28 +106,8 @@ def pulse_edges(t: np.ndarray, signal: np.ndarray, threshold: float | None = Non
                              "revolutions are needed")
     frac = (thr - x[k]) / (x[k + 1] - x[k])
     edges = t[k] + frac * (t[k + 1] - t[k])
-    period = np.diff(edges)
-    # each revolution's speed against the line through its neighbours' at its middle: a
-    # start from rest (speed growing from zero) is smooth, a missed pulse halves the speed
-    # of its revolution, a double trigger doubles it in the two halves it makes -- so the
-    # neighbours are the 2nd and 3rd on each side, past a partner half
-    speed = 2.0 * math.pi / period
-    mid = 0.5 * (edges[1:] + edges[:-1])
-    for i in range(len(period)):
-        nb = [j for j in (i - 3, i - 2, i + 2, i + 3) if 0 <= j < len(period)]
-        if len(nb) < 2:
-            continue
-        slope, icept = np.polyfit(mid[nb], speed[nb], 1)
-        predicted = slope * mid[i] + icept
-        ratio = period[i] * predicted / (2.0 * math.pi) if predicted > 0 else math.inf
-        if not PERIOD_RATIO[0] <= ratio <= PERIOD_RATIO[1]:
-            kind = "missing pulse" if ratio > 1 else "extra pulse (double trigger or noise)"
-            line = f", line {lines[k[i] + 1]}" if lines is not None else ""
-            raise KeyphasorError(
-                f"{where}{line}: irregular pulses at t = {edges[i]:.6g}: a revolution of {period[i]:.4g} between "
-                f"pulses {i + 1} and {i + 2}, {ratio:.2f}x its neighbours ({kind}); check the threshold "
-                f"(now {thr:g}) or the keyphasor signal"
-            )
+    check_periods(edges, range(len(edges) - 1), thr, where=where,
+                  line_of=(lambda i: int(lines[k[i] + 1])) if lines is not None else None)
     return edges
 
 
@@ -92,3 +117,222 @@ def spin_from_pulses(t: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.n
     inside = (t >= edges[0]) & (t <= edges[-1])
     ti = t[inside]
     return inside, spline(ti), spline(ti, 1), spline(ti, 2)
+
+
+#: samples gathered before the threshold and the pulse's polarity are fixed (at least two
+#: leading edges must be among them, so a whole revolution shows which state is short)
+LEVEL_SAMPLES = 2048
+#: a stream whose first samples this many hold no two pulses has no usable keyphasor
+MAX_LEVEL_SAMPLES = 1 << 20
+#: edges either side of a revolution's two in its local spline (the not-a-knot spline's
+#: end conditions fade by 2 - sqrt(3) = 0.27 a knot: 0.27^3 = 2 % of the end effect, on
+#: the third difference of the pulse times, which a smooth speed keeps tiny); the
+#: missing/extra-pulse check needs the same three revolutions ahead
+SPLINE_HALF_WINDOW = 3
+#: fewer raw samples a revolution than this: the pulse edges (and the 1X) are aliased
+MIN_SAMPLES_PER_TURN = 8
+
+
+class KeyphasorTracker:
+    """The spin of a keyphasor stream, causal, chunk by chunk (what :func:`pulse_edges` and
+    :func:`spin_from_pulses` do with a whole record).
+
+    ``push(t, signal, payload, lines)`` takes the next samples (``payload``: rows carried
+    along, e.g. the probes) and returns the samples now known as ``(t, phi, speed,
+    acceleration, payload, lines)``; ``finish()`` returns the rest at the end.
+
+    - The threshold (``threshold``, else halfway between the 0.1/99.9 % levels) and the
+      pulse's polarity (the short state) are fixed from the first samples (at least
+      :data:`LEVEL_SAMPLES` and two leading edges): a threshold that followed the signal
+      would move the edges and put a wobble into the angle.
+    - An edge between two chunks is found from the last sample kept from the chunk before.
+    - Revolution ``k`` (edge ``k`` to ``k + 1``) is handed out once edge ``k + 4`` is known:
+      its missing/extra-pulse check (:func:`check_periods`, the batch path's) reads the
+      2nd and 3rd revolutions on each side (so a sample is never handed out before its
+      revolution passed the check), and its angle is the cubic spline through
+      ``(edge j, 2 pi j)`` for the edges ``k - 3 .. k + 4`` (local; the whole record's
+      spline differs from it by the end conditions' fading remainder).  The samples
+      are held back until then: four revolutions.
+    - Samples before the first edge and after the last are dropped, as in the batch path.
+    """
+
+    def __init__(self, threshold: float | None = None, *, where: str = "keyphasor") -> None:
+        self.where = where
+        self.threshold = threshold
+        self._fixed = False
+        self._pulse_high = True
+        self._level: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._prev: tuple[float, float] | None = None  # last sample (t, signal) of the chunk before
+        self._edges = np.zeros(0)  # a window of the edges; edges[0] is pulse number _e0
+        self._edge_lines = np.zeros(0, dtype=np.int64)
+        self._e0 = 0
+        self._n_edges = 0
+        self._next = 0  # the next revolution to hand out (and to check)
+        self._dt = math.nan
+        self._held_t = np.zeros(0)
+        self._held_p: np.ndarray | None = None
+        self._held_lines = np.zeros(0, dtype=np.int64)
+        #: an irregular revolution found: the samples before it were handed out, none after
+        self.error: KeyphasorError | None = None
+
+    @property
+    def edges_seen(self) -> int:
+        return self._n_edges
+
+    # ------------------------------------------------------------------ input
+    def push(self, t: np.ndarray, signal: np.ndarray, payload: np.ndarray, lines: np.ndarray):
+        if self.error is not None:
+            raise self.error
+        t = np.asarray(t, dtype=float)
+        x = np.asarray(signal, dtype=float)
+        payload = np.asarray(payload, dtype=float).reshape(len(t), -1)
+        if self._held_p is None:
+            self._held_p = np.zeros((0, payload.shape[1]))
+        if len(t) > 1 and math.isnan(self._dt):
+            self._dt = float(t[1] - t[0])
+        if not self._fixed:
+            self._level.append((t, x, payload, lines))
+            n = sum(len(c[0]) for c in self._level)
+            if n < LEVEL_SAMPLES or not self._try_levels(final=False, limit=n >= MAX_LEVEL_SAMPLES):
+                return self._empty()
+            parts = self._level
+            self._level = []
+            t, x, payload, lines = (np.concatenate([c[i] for c in parts]) for i in range(4))
+        self._find_edges(t, x, lines)
+        self._hold(t, payload, lines)
+        return self._release(final=False)
+
+    def finish(self):
+        """The samples up to the last edge (the last revolutions checked with the neighbours they have)."""
+        if self.error is not None:
+            raise self.error
+        if not self._fixed:
+            if not self._level:
+                return self._empty()
+            parts, self._level = self._level, []
+            t, x, payload, lines = (np.concatenate([c[i] for c in parts]) for i in range(4))
+            self._levels(x, final=True)
+            self._find_edges(t, x, lines)
+            self._hold(t, payload, lines)
+        if self._n_edges < MIN_PULSES:
+            raise KeyphasorError(f"{self.where}: only {self._n_edges} pulses found (threshold {self.threshold:g}); "
+                                 f"at least {MIN_PULSES} revolutions are needed")
+        return self._release(final=True)
+
+    # ------------------------------------------------------------------ steps
+    def _levels(self, x: np.ndarray, *, final: bool) -> bool:
+        """Fix the threshold and polarity from the samples ``x``; False: not yet decidable."""
+        lo, hi = np.percentile(x, [0.1, 99.9])
+        if not hi > lo:
+            if final:
+                raise KeyphasorError(f"{self.where}: the signal is constant ({lo:g}): no pulses")
+            return False
+        thr = 0.5 * (lo + hi) if self.threshold is None else float(self.threshold)
+        if not lo < thr < hi:
+            if final or self.threshold is not None:
+                raise KeyphasorError(f"{self.where}: threshold {thr:g} is outside the signal's range [{lo:g}, {hi:g}] "
+                                     "of its first samples")
+            return False
+        high = x > thr
+        pulse_high = bool(high.mean() < 0.5)
+        state = high if pulse_high else ~high
+        if not final and np.count_nonzero(~state[:-1] & state[1:]) < 2:
+            return False
+        self.threshold, self._pulse_high, self._fixed = thr, pulse_high, True
+        return True
+
+    def _try_levels(self, *, final: bool, limit: bool) -> bool:
+        x = np.concatenate([c[1] for c in self._level])
+        ok = self._levels(x, final=final)
+        if not ok and limit:
+            raise KeyphasorError(f"{self.where}: no two keyphasor pulses in the first {len(x)} samples")
+        return ok
+
+    def _find_edges(self, t: np.ndarray, x: np.ndarray, lines: np.ndarray) -> None:
+        if not len(t):
+            return
+        if self._prev is not None:
+            tt = np.concatenate([[self._prev[0]], t])
+            xx = np.concatenate([[self._prev[1]], x])
+            ll = np.concatenate([[-1], lines])
+        else:
+            tt, xx, ll = t, x, lines
+        high = xx > self.threshold
+        state = high if self._pulse_high else ~high
+        k = np.nonzero(~state[:-1] & state[1:])[0]
+        self._prev = (float(t[-1]), float(x[-1]))
+        if not len(k):
+            return
+        frac = (self.threshold - xx[k]) / (xx[k + 1] - xx[k])
+        new = tt[k] + frac * (tt[k + 1] - tt[k])
+        before = self._edges[-1:] if len(self._edges) else np.zeros(0)
+        periods = np.diff(np.concatenate([before, new]))
+        if periods.size and np.isfinite(self._dt):
+            short = periods / self._dt < MIN_SAMPLES_PER_TURN
+            if short.any():
+                j = int(np.argmax(short))
+                m = j + 1 - len(before)  # the new edge ending the short revolution
+                raise KeyphasorError(f"{self.where}, line {ll[k[m] + 1]}: only {periods[j] / self._dt:.1f} samples "
+                                     f"per revolution at t = {new[m]:.6g}: sample faster")
+        self._edges = np.concatenate([self._edges, new])
+        self._edge_lines = np.concatenate([self._edge_lines, ll[k + 1]])
+        self._n_edges += len(new)
+
+    def _hold(self, t: np.ndarray, payload: np.ndarray, lines: np.ndarray) -> None:
+        if self._n_edges == 0:
+            return  # before the first pulse: no angle, dropped as in the batch path
+        if self._next == 0 and not self._held_t.size:
+            keep = t >= self._edges[0]
+            t, payload, lines = t[keep], payload[keep], lines[keep]
+        self._held_t = np.concatenate([self._held_t, t])
+        self._held_p = np.concatenate([self._held_p, payload])
+        self._held_lines = np.concatenate([self._held_lines, lines])
+
+    def _release(self, *, final: bool):
+        edges, e0 = self._edges, self._e0
+        last = self._n_edges - 1  # number of the last edge known
+        # revolutions [next, stop) can go: those whose edge k + 4 is known (all, at the end)
+        stop = last if final else last - SPLINE_HALF_WINDOW
+        # the missing/extra-pulse check of every revolution handed out (its neighbours are
+        # known); at an irregular one, the revolutions before it go out and the error waits
+        # in ``error`` (the caller processes them first)
+        for i in range(self._next, stop):
+            try:
+                check_periods(edges, (i - e0,), float(self.threshold), where=self.where,
+                              line_of=lambda j: int(self._edge_lines[j]), first_pulse=e0)
+            except KeyphasorError as exc:
+                self.error, stop = exc, i
+                break
+        if stop <= self._next:
+            return self._empty()
+        t_end = edges[stop - e0]
+        n_out = int(np.searchsorted(self._held_t, t_end, side="right" if final else "left"))
+        t = self._held_t[:n_out]
+        phi, speed, accel = np.empty(n_out), np.empty(n_out), np.empty(n_out)
+        rev = np.searchsorted(edges, t, side="right") - 1 + e0  # revolution of each sample
+        rev = np.minimum(rev, last - 1)
+        for k in range(self._next, stop):
+            sel = np.nonzero(rev == k)[0]
+            if not sel.size:
+                continue
+            lo = max(k - SPLINE_HALF_WINDOW, 0)
+            hi = min(k + 1 + SPLINE_HALF_WINDOW, last)
+            spline = CubicSpline(edges[lo - e0 : hi - e0 + 1], 2.0 * math.pi * np.arange(lo, hi + 1))
+            ts = t[sel]
+            phi[sel], speed[sel], accel[sel] = spline(ts), spline(ts, 1), spline(ts, 2)
+        out = (t, phi, speed, accel, self._held_p[:n_out], self._held_lines[:n_out])
+        self._held_t = self._held_t[n_out:]
+        self._held_p = self._held_p[n_out:]
+        self._held_lines = self._held_lines[n_out:]
+        self._next = stop
+        # keep the edges the next revolutions' splines and checks read
+        drop = max(0, stop - SPLINE_HALF_WINDOW - e0)
+        self._edges = self._edges[drop:]
+        self._edge_lines = self._edge_lines[drop:]
+        self._e0 += drop
+        return out
+
+    def _empty(self):
+        p = self._held_p.shape[1] if self._held_p is not None else 0
+        z = np.zeros(0)
+        return z, z, z, z, np.zeros((0, p)), np.zeros(0, dtype=np.int64)

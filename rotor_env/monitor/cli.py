@@ -17,22 +17,28 @@ def add_monitor_parser(sub) -> None:
         description="Read a measurement stream (CSV or Parquet, the columns diagnose reads) in chunks, identify "
         "the model recursively (forgetting or a sliding window) and run a CUSUM per effect whose threshold "
         "follows from the target in-control ARL (samples between false alarms). JSON lines: status lines, "
-        "appeared/changed/disappeared events, a summary at the end.",
+        "appeared/changed/disappeared events, a summary at the end. With --rig RIG.yaml and --natural-rpm N the "
+        "stream holds a rig's SI waveforms (time in s, keyphasor or speed, probes), made dimensionless on the fly; "
+        "events then carry s and rpm too.",
     )
     p.add_argument("file", metavar="FILE|-", help="measurement file, or - for standard input")
-    p.add_argument("--rig", metavar="RIG.yaml", help="rig description of SI data (not available yet)")
+    p.add_argument("--rig", metavar="RIG.yaml", help="FILE holds a rig's SI waveforms described by this rig file "
+                   "(docs/MEASUREMENTS.md); needs --natural-rpm")
+    p.add_argument("--natural-rpm", type=float, metavar="N", help="with --rig: the rotor's natural frequency in rpm, "
+                   "the model's time scale (natural_frequency_rpm of `rotor-id diagnose RUN --rig RIG --json`)")
     p.add_argument("--model", metavar="A,B,...", help="effects identified and watched "
                    "(default: unbalance,asymmetry,viscous_damping,nonlinear_stiffness,structural_damping)")
-    p.add_argument("--ip", type=float, default=0.3, help="inertia ratio I_p/I_t (default 0.3)")
+    p.add_argument("--ip", type=float, help="inertia ratio I_p/I_t (default 0.3; with --rig the rig's)")
     mem = p.add_mutually_exclusive_group()
     mem.add_argument("--forgetting", type=float, metavar="LAMBDA",
                      help="forgetting factor per sample (default 0.9995: a memory of 2000 samples)")
-    mem.add_argument("--window", type=float, metavar="T", help="a sliding window of T time units instead")
+    mem.add_argument("--window", type=float, metavar="T", help="a sliding window of T time units (with --rig: "
+                     "seconds) instead")
     p.add_argument("--arl0", type=float, default=1e7, metavar="N",
                    help="target in-control average run length, samples between false alarms (default 1e7)")
     p.add_argument("--block", type=int, default=200, metavar="N", help="samples per block of evidence (default 200)")
-    p.add_argument("--status-every", type=float, default=10.0, metavar="T",
-                   help="a status line every T time units (default 10; 0: none)")
+    p.add_argument("--status-every", type=float, metavar="T",
+                   help="a status line every T time units (default 10; with --rig: seconds, default 1; 0: none)")
     p.add_argument("--follow", action="store_true", help="wait for rows appended to FILE (like tail -f)")
     p.add_argument("--idle-exit", type=float, metavar="SECONDS",
                    help="with --follow: end after this long without new rows (default: never)")
@@ -44,12 +50,15 @@ def add_monitor_parser(sub) -> None:
     p.set_defaults(func=run_monitor)
 
 
-def _config(args, dt: float):
+def _config(args, dt: float, *, ip: float = 0.3, time_scale: float = 1.0):
+    """The monitor's options; ``time_scale``: the options' time unit in the stream's (``w_ref``
+    for a rig stream, whose options are in seconds)."""
     from ..effects import get_effect
     from .core import MonitorConfig
 
-    opts: dict = {"ip": args.ip, "arl0": args.arl0, "block": args.block,
-                  "status_every": args.status_every or None}
+    every = args.status_every if args.status_every is not None else (1.0 if args.rig else 10.0)
+    opts: dict = {"ip": args.ip if args.ip is not None else ip, "arl0": args.arl0, "block": args.block,
+                  "status_every": every * time_scale or None}
     if args.model:
         names = [m.strip() for m in args.model.split(",") if m.strip()]
         for n in names:
@@ -58,7 +67,7 @@ def _config(args, dt: float):
     if args.forgetting is not None:
         opts["forgetting"] = args.forgetting
     if args.window is not None:
-        opts["window"] = max(args.block, int(round(args.window / dt)))
+        opts["window"] = max(args.block, int(round(args.window * time_scale / dt)))
     return MonitorConfig(**opts)
 
 
@@ -68,8 +77,16 @@ def run_monitor(args: argparse.Namespace) -> int:
     from .core import Monitor
     from .stream import StreamReader
 
+    rig = None
     if args.rig:
-        raise ValueError("--rig: rig descriptions (SI data) are not available yet; give dimensionless data")
+        from ..measurements.rig import load_rig
+        from .rig_stream import natural_rpm_required
+
+        if args.natural_rpm is None:
+            raise ValueError(natural_rpm_required())
+        rig = load_rig(args.rig)
+    elif args.natural_rpm is not None:
+        raise ValueError("--natural-rpm goes with --rig RIG.yaml (SI rig data); a dimensionless stream has no time scale")
     if args.report:
         check_writable(args.report, overwrite=args.force)
     if args.state:
@@ -81,29 +98,39 @@ def run_monitor(args: argparse.Namespace) -> int:
         live = LiveView(args.file)
 
     def emit(event: dict) -> None:
+        clock = getattr(reader, "clock", None)
+        if clock is not None:
+            event = clock.annotate(event)
         if live is not None:
             live.show(event)
         else:
             print(json.dumps(event), flush=True)
 
-    reader = StreamReader(args.file, follow=args.follow, idle_exit=args.idle_exit)
+    if rig is not None:
+        from .rig_stream import RigStream
+
+        reader = RigStream(args.file, rig, args.natural_rpm, follow=args.follow, idle_exit=args.idle_exit)
+        ip, scale = rig.ip, reader.w_ref
+    else:
+        reader = StreamReader(args.file, follow=args.follow, idle_exit=args.idle_exit)
+        ip, scale = 0.3, 1.0
     monitor = Monitor.load(args.resume) if args.resume else None
     status = 0
     try:
         for chunk in reader:
             if monitor is None:
                 dt = float(chunk[1, 0] - chunk[0, 0]) if chunk.shape[0] > 1 else 0.01
-                monitor = Monitor(_config(args, dt))
-                if live is not None:
-                    live.start(monitor)
+                monitor = Monitor(_config(args, dt, ip=ip, time_scale=scale))
+            if live is not None and live.monitor is None:
+                live.start(monitor, clock=getattr(reader, "clock", None))
             for event in monitor.update(chunk):
                 emit(event)
     except MeasurementError as exc:
         # the rows before the bad line were processed: the monitor keeps that state
         print(f"rotor-id monitor: error: {exc}", file=sys.stderr)
         if monitor is not None:
-            emit({"event": "error", "message": str(exc), "line": reader.line + 1,
-                  "samples": monitor.samples})
+            line = getattr(reader, "error_line", None) or reader.line + 1
+            emit({"event": "error", "message": str(exc), "line": line, "samples": monitor.samples})
         status = 2
     except KeyboardInterrupt:
         status = 130
@@ -121,5 +148,6 @@ def run_monitor(args: argparse.Namespace) -> int:
     if args.report:
         from .report import write_report
 
-        write_report(monitor, args.report, source=reader.name, overwrite=args.force)
+        write_report(monitor, args.report, source=reader.name, overwrite=args.force,
+                     clock=getattr(reader, "clock", None))
     return status

@@ -1,4 +1,8 @@
-"""The live view of ``rotor-id monitor`` in a terminal (rich): flags, coefficients, CUSUMs, alarms."""
+"""The live view of ``rotor-id monitor`` in a terminal (rich): flags, coefficients, CUSUMs, alarms.
+
+With a rig stream (``--rig``) times are shown in s and speeds in rpm (the events'
+``t_s``, ``rpm``, ``t_alarm_s``, ``t_onset_s`` fields).
+"""
 
 from __future__ import annotations
 
@@ -17,11 +21,14 @@ class LiveView:
         self.monitor = None
         self.alarms: list[dict] = []
         self.last_status: dict | None = None
+        self.clock = None
 
-    def start(self, monitor) -> None:
+    def start(self, monitor, clock=None) -> None:
+        """Show ``monitor``; ``clock`` (a :class:`~.rig_stream.RigClock`): in s and rpm."""
         from rich.live import Live
 
         self.monitor = monitor
+        self.clock = clock
         self.live = Live(self._render(), console=self.console, refresh_per_second=4, transient=False)
         self.live.start()
 
@@ -41,7 +48,9 @@ class LiveView:
 
         st = self.last_status
         title = f"rotor-id monitor — {self.source}"
-        if st is not None:
+        if st is not None and "t_s" in st:
+            title += f"   t = {st['t_s']:.3f} s, {st['rpm']:.0f} rpm, noise floor {st['noise_floor']:.3g}"
+        elif st is not None:
             title += f"   t = {st['t']:.2f}, speed {st['speed']:.3f}, noise floor {st['noise_floor']:.3g}"
         table = Table(title=title)
         for col in ("effect", "coefficients", "significant", "CUSUM"):
@@ -55,9 +64,8 @@ class LiveView:
         parts: list[Any] = [table]
         if self.alarms:
             a = self.alarms[-1]
-            parts.append(f"[bold red]latest alarm[/bold red]: {a['effect']} {a['event']} at t = {a['t_alarm']:.2f} "
-                         f"(onset {a['t_onset']:.2f}): {a['value_before']} -> {a['value_after']}; "
-                         f"{len(self.alarms)} alarm(s) so far")
+            parts.append(f"[bold red]latest alarm[/bold red]: {a['effect']} {a['event']} at {_when(a)}: "
+                         f"{a['value_before']} -> {a['value_after']}; {len(self.alarms)} alarm(s) so far")
         else:
             parts.append("no alarm")
         return Group(*parts)
@@ -68,6 +76,15 @@ class LiveView:
             self.live = None
 
     def print_summary(self, summary: dict) -> None:
-        self.console.print(f"{summary['samples']} samples to t = {summary['t']:.2f}: {summary['alarms']} alarm(s)")
+        end = f"t = {summary['t_s']:.3f} s ({summary['rpm']:.0f} rpm)" if "t_s" in summary else f"t = {summary['t']:.2f}"
+        self.console.print(f"{summary['samples']} samples to {end}: {summary['alarms']} alarm(s)")
         for e in summary["events"]:
-            self.console.print(f"  {e['effect']} {e['event']} at t = {e['t_alarm']:.2f} (onset {e['t_onset']:.2f})")
+            self.console.print(f"  {e['effect']} {e['event']} at {_when(e)}")
+
+
+def _when(e: dict) -> str:
+    """An alarm's time (and onset): in s and rpm for a rig stream, else in time units."""
+    if "t_alarm_s" in e:
+        rpm = f", {e['rpm_alarm']:.0f} rpm" if "rpm_alarm" in e else ""
+        return f"t = {e['t_alarm_s']:.3f} s{rpm} (onset {e['t_onset_s']:.3f} s)"
+    return f"t = {e['t_alarm']:.2f} (onset {e['t_onset']:.2f})"

@@ -8,15 +8,27 @@ import json
 from ..outputs import atomic_write_text
 
 
-def write_report(monitor, path, *, source: str, overwrite: bool = False) -> None:
-    """Write the run's events and final state to ``path`` (every value escaped)."""
+def write_report(monitor, path, *, source: str, overwrite: bool = False, clock=None) -> None:
+    """Write the run's events and final state to ``path`` (every value escaped); ``clock``
+    (a rig stream's :class:`~.rig_stream.RigClock`): times in s and speeds in rpm."""
     s = monitor.summary()
     esc = html.escape
+
+    def when(t: float, speed: float | None = None) -> str:
+        if clock is None:
+            return f"{t:.2f}"
+        rpm = f" ({clock.rpm(speed):.0f} rpm)" if speed is not None else ""
+        return f"{clock.seconds(t):.3f} s{rpm}"
+
     rows = "".join(
-        f"<tr><td>{esc(e['event'])}</td><td>{esc(e['effect'])}</td><td>{e['t_onset']:.2f}</td>"
-        f"<td>{e['t_alarm']:.2f}</td><td>{esc(json.dumps(e['value_before']))}</td>"
+        f"<tr><td>{esc(e['event'])}</td><td>{esc(e['effect'])}</td>"
+        f"<td>{when(e['t_onset'], e['evidence'].get('speed_onset'))}</td>"
+        f"<td>{when(e['t_alarm'], e['evidence'].get('speed_alarm'))}</td><td>{esc(json.dumps(e['value_before']))}</td>"
         f"<td>{esc(json.dumps(e['value_after']))}</td><td>{e['evidence']['log10_p']:.1f}</td></tr>"
         for e in monitor.events)
+    end = (f"t = {s['t']:.2f} (speed {s['speed']:.3f})" if clock is None else
+           f"t = {clock.seconds(s['t']):.3f} s ({clock.rpm(s['speed']):.0f} rpm; natural frequency "
+           f"{clock.natural_rpm:g} rpm, the model's time unit 1/{clock.w_ref:.6g} s)")
     model = "".join(
         f"<tr><td>{esc(name)}</td><td>{esc(json.dumps(coef))}</td><td>{'yes' if s['significant'][name] else 'no'}"
         f"</td><td>{s['counted_blocks'][name]}</td></tr>" for name, coef in s["coefficients"].items())
@@ -25,7 +37,7 @@ def write_report(monitor, path, *, source: str, overwrite: bool = False) -> None
 <style>body{{font-family:sans-serif;max-width:60em;margin:2em auto}}td,th{{border-bottom:1px solid #ccc;
 padding:.2em .6em}}table{{border-collapse:collapse}}</style></head><body>
 <h1>On-line monitoring of {esc(source)}</h1>
-<p>{s['samples']} samples to t = {s['t']:.2f} (speed {s['speed']:.3f}); equation-error noise floor
+<p>{s['samples']} samples to {esc(end)}; equation-error noise floor
 {s['noise_floor']:.3g}. CUSUM per effect, threshold {s['threshold']:.3f} for a target in-control ARL of
 {cfg.arl0:g} samples (blocks of {cfg.block}); {s['alarms']} alarm(s).</p>
 <h2>Alarms</h2><table><tr><th>event</th><th>effect</th><th>onset</th><th>alarm</th><th>before</th>

@@ -5,7 +5,9 @@ Parquet; required ``t, phi, theta_x, theta_y``, rates and accelerations optional
 are the errors: they name the source, the (1-based) line and the column.  Nothing is
 loaded whole: CSV text is read in blocks of bytes, only complete lines are parsed
 (pyarrow's CSV parser on the block; on a parse error the block is read again line by
-line to name the bad one), Parquet row batch by row batch.
+line to name the bad one), Parquet row batch by row batch.  :meth:`StreamReader.blocks`
+hands out the raw file columns (the rig adapter, :mod:`.rig_stream`, reads SI waveforms
+through it); iterating the reader validates them as the model's ten columns.
 
 Missing rates and accelerations are estimated as ``load_measurements`` does
 (Savitzky-Golay, :func:`rotor_env.io.derive_rates`), on a sliding buffer: a sample's
@@ -21,7 +23,7 @@ import math
 import select
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import BinaryIO
 
@@ -42,11 +44,15 @@ class StreamReader:
     ``source``: a path, ``"-"`` (standard input) or a binary file object.  ``follow``:
     at the end of the data wait for more (``poll`` seconds between looks) until
     ``idle_exit`` seconds pass without any (``None``: forever).  ``line`` is the file
-    line of the last row handed out.
+    line of the last row handed out.  ``required``: the columns the header must have
+    (default the model's; ``missing_hint`` then says where the names come from).
     """
 
     def __init__(self, source, *, follow: bool = False, poll: float = 0.2, idle_exit: float | None = None,
-                 chunk_bytes: int = _CHUNK_BYTES) -> None:
+                 chunk_bytes: int = _CHUNK_BYTES, required: Sequence[str] = REQUIRED,
+                 missing_hint: str | None = None) -> None:
+        self.required = tuple(required)
+        self.missing_hint = missing_hint
         self.follow = follow
         self.poll = poll
         self.idle_exit = idle_exit
@@ -78,6 +84,13 @@ class StreamReader:
 
     # ------------------------------------------------------------------ chunks
     def __iter__(self) -> Iterator[np.ndarray]:
+        for parsed in self.blocks():
+            yield from self._emit(parsed)
+        yield from self._emit(None)
+
+    def blocks(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """Raw blocks ``(data in the file's columns, file line of each row)``, header in
+        :attr:`header`; at a bad line the rows before it come first, then the error."""
         if self._path is not None and self._path.suffix == ".parquet":
             yield from self._parquet()
             return
@@ -87,6 +100,11 @@ class StreamReader:
         finally:
             if self._fh is None:
                 fh.close()
+
+    @property
+    def header(self) -> list[str]:
+        """The stream's column names (known once the first block is out)."""
+        return list(self._header_names)
 
     def _read(self, fh: BinaryIO) -> bytes:
         """What is there now, up to ``chunk_bytes``: a pipe hands out 64 KiB per read, so keep
@@ -120,7 +138,7 @@ class StreamReader:
                 return
             time.sleep(self.poll)
 
-    def _csv(self, fh: BinaryIO) -> Iterator[np.ndarray]:
+    def _csv(self, fh: BinaryIO) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         rest = b""
         header: list[str] | None = None
         for data in self._more(fh):
@@ -143,18 +161,17 @@ class StreamReader:
                 yield from self._parsed(rest + b"\n", header)
         if header is None:
             raise MeasurementError(f"{self.name}: the stream is empty (expected a header line)")
-        yield from self._emit(None)
 
-    def _parsed(self, block: bytes, header: list[str]) -> Iterator[np.ndarray]:
-        """Validated chunks of a block of lines; at a bad line, the rows before it first, then the error."""
+    def _parsed(self, block: bytes, header: list[str]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """The rows of a block of lines; at a bad line, the rows before it first, then the error."""
         self._partial = None
         try:
             parsed = self._parse(block, header)
         except MeasurementError:
             if self._partial is not None and self._partial[0].shape[0]:
-                yield from self._emit(self._partial)
+                yield self._partial
             raise
-        yield from self._emit(parsed)
+        yield parsed
 
     def _header(self, raw: bytes) -> list[str]:
         text = raw.decode("utf-8-sig", errors="replace").strip()
@@ -162,7 +179,10 @@ class StreamReader:
         dup = {h for h in header if header.count(h) > 1}
         if dup:
             raise MeasurementError(f"{self.name}: column(s) {sorted(dup)} appear more than once")
-        missing = [c for c in REQUIRED if c not in header]
+        missing = [c for c in self.required if c not in header]
+        if missing and self.missing_hint is not None:
+            raise MeasurementError(f"{self.name}: column(s) {missing} {self.missing_hint} are not in the stream "
+                                   f"(its header has {header})")
         if missing:
             raise MeasurementError(f"{self.name}: missing required column(s) {missing}; the header has {header}; "
                                    f"required: {list(REQUIRED)}, optional: {list(DERIVABLE)}")
@@ -219,7 +239,7 @@ class StreamReader:
             lines.append(line_no)
         return np.array(rows, dtype=float).reshape(-1, len(header)), np.array(lines, dtype=np.int64)
 
-    def _parquet(self) -> Iterator[np.ndarray]:
+    def _parquet(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         import pyarrow.parquet as pq
 
         try:
@@ -236,9 +256,8 @@ class StreamReader:
                 raise MeasurementError(f"{self._path}: a column is not numeric") from None
             lines = np.arange(row, row + data.shape[0], dtype=np.int64)
             row += data.shape[0]
-            yield from self._emit((data, lines))
+            yield data, lines
         del header
-        yield from self._emit(None)
 
     # ------------------------------------------------------------------ validation
     def _emit(self, parsed) -> Iterator[np.ndarray]:
