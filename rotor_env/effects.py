@@ -15,7 +15,12 @@ docs all read this table; adding an effect is one :class:`Effect` and one
 
 Column functions take ``(phi, phid, phidd, th_x, th_y, w_x, w_y, ip)`` — spin angle,
 speed and acceleration, inclinations and their rates, inertia ratio — and return
-``(cols_y, cols_x)``, two tuples with one entry per coefficient.  They must work on
+``(cols_y, cols_x)``, two tuples with one entry per coefficient.  An effect may have a
+parameter that enters the columns non-linearly (the rub's clearance): it is declared
+*scanned* (:attr:`Parameter.scan_points`), its value is one more argument of the column
+function (after ``ip``, in declaration order, with a default so that the eight-argument
+call still works), and the diagnosis finds it by a scan over a grid, as it finds an
+onset (:mod:`rotor_env.diagnosis.candidates`).  They must work on
 floats and on numpy arrays alike and be compilable by numba (plain arithmetic,
 ``np.sin``/``np.cos``/``np.sqrt``), so the simulator can call them.
 """
@@ -65,6 +70,21 @@ class Parameter:
     #: candidate whose identified value does (curve-fitting, not physics)
     bounds_reason: str = ""
     domain: tuple[float, float] = (-math.inf, math.inf)
+    #: > 0: the parameter enters the columns non-linearly (not a regression coefficient):
+    #: the column function takes its value as an argument, and the diagnosis scans it over
+    #: this many values spaced geometrically over ``[lower, upper]`` (then refines around
+    #: the best); 0: an ordinary parameter, mapped to coefficients by ``to_coefficients``
+    scan_points: int = 0
+
+    @property
+    def scanned(self) -> bool:
+        return self.scan_points > 0
+
+    def scan_grid(self) -> np.ndarray:
+        """The scan's grid: ``scan_points`` values spaced geometrically over ``[lower, upper]``."""
+        if not self.scanned:
+            raise ValueError(f"parameter {self.name!r} is not scanned")
+        return np.geomspace(self.lower, self.upper, self.scan_points)
 
     def contains(self, value: float) -> bool:
         """Is ``value`` physically plausible (inside ``[lower, upper]``)?"""
@@ -117,9 +137,31 @@ class Effect:
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.parameters)
 
-    def regressors(self, phi, phid, phidd, th_x, th_y, w_x, w_y, ip) -> tuple[np.ndarray, np.ndarray]:
-        """Columns as arrays: ``(X_y, X_x)`` each of shape ``(m, n_coefficients)``."""
-        cy, cx = self.columns(phi, phid, phidd, th_x, th_y, w_x, w_y, ip)
+    @property
+    def scanned_parameters(self) -> tuple[Parameter, ...]:
+        """The parameters that enter the columns non-linearly (extra column arguments)."""
+        return tuple(p for p in self.parameters if p.scanned)
+
+    @property
+    def kernel_width(self) -> int:
+        """Slots of the effect in the simulator's coefficient vector: its coefficients, then
+        the values of its scanned parameters."""
+        return len(self.coefficients) + len(self.scanned_parameters)
+
+    def scanned_values(self, values: Mapping[str, float] | None = None) -> tuple[float, ...]:
+        """The scanned parameters' values from ``values`` (their defaults where absent)."""
+        values = values or {}
+        return tuple(float(values.get(p.name, p.default)) for p in self.scanned_parameters)
+
+    def kernel_values(self, values: Mapping[str, float]) -> tuple[float, ...]:
+        """The effect's slots of the simulator's coefficient vector (see :attr:`kernel_width`)."""
+        return (*self.to_coefficients(values), *self.scanned_values(values))
+
+    def regressors(self, phi, phid, phidd, th_x, th_y, w_x, w_y, ip,
+                   scanned: Mapping[str, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Columns as arrays: ``(X_y, X_x)`` each of shape ``(m, n_coefficients)``;
+        ``scanned``: the values of the scanned parameters (their defaults where absent)."""
+        cy, cx = self.columns(phi, phid, phidd, th_x, th_y, w_x, w_y, ip, *self.scanned_values(scanned))
         m = np.shape(th_x)
         Xy = np.column_stack([np.broadcast_to(np.asarray(c, dtype=float), m) for c in cy])
         Xx = np.column_stack([np.broadcast_to(np.asarray(c, dtype=float), m) for c in cx])
@@ -220,6 +262,33 @@ def _breathing_crack(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
     return (g_y, c * g_y, -s * g_y), (g_x, c * g_x, -s * g_x)
 
 
+#: the rub's default radial clearance (tilt units, rad): the column function's default
+RUB_CLEARANCE = 0.04
+
+
+def _rub(phi, phid, phidd, th_x, th_y, w_x, w_y, ip, clearance=RUB_CLEARANCE):
+    # contact beyond the clearance: f = max(|z| - clearance, 0) / |z| (0 at z = 0, plain
+    # arithmetic for numba, floats and arrays alike); s = sign(phid): the shaft's surface
+    # slides forward on the casing when it spins forward (its speed R phid dwarfs the orbit's
+    # |z| w: the contact slips, it does not roll), and the friction on the rotor is backward
+    r = np.sqrt(th_x * th_x + th_y * th_y)
+    d = r - clearance
+    f = 0.5 * (d + np.abs(d)) / (r + 1e-300)
+    s = phid / (np.abs(phid) + 1e-300)
+    # M = -k_c f z - mu k_c s f i z (i z: the forward tangent); coefficients (k_c, mu k_c)
+    return (-f * th_y, s * f * th_x), (-f * th_x, -s * f * th_y)
+
+
+def _rub_to(p: Mapping[str, float]) -> tuple[float, float]:
+    k = float(p["rub_stiffness"])
+    return (k, float(p["rub_friction"]) * k)
+
+
+def _rub_from(c) -> dict[str, float]:
+    k = float(c[0])
+    return {"rub_stiffness": k, "rub_friction": float(c[1]) / k if k != 0 else math.inf}
+
+
 def _polar(amp: str, phase: str):
     def to_coef(p: Mapping[str, float]) -> tuple[float, float]:
         return (float(p[amp]) * math.cos(p[phase]), float(p[amp]) * math.sin(p[phase]))
@@ -276,6 +345,10 @@ def register_effect(effect: Effect, *, replace: bool = False) -> Effect:
         raise ValueError(f"effect {effect.name!r} is already registered")
     if len(effect.coefficients) == 0:
         raise ValueError(f"effect {effect.name!r} declares no coefficients")
+    for p in effect.scanned_parameters:
+        if not (0.0 < p.lower < p.upper < math.inf and p.scan_points >= 2):
+            raise ValueError(f"effect {effect.name!r}: the scanned parameter {p.name!r} needs finite bounds "
+                             f"0 < lower < upper (a geometric grid) and at least 2 scan points")
     for other in EFFECTS.values():
         if other.name == effect.name:
             continue
@@ -381,7 +454,7 @@ register_effect(
         cause="non-linear elastic restoring moment (a second-order polynomial from one potential)",
         signature="0x (a static offset) and 2x in the fixed frame, growing with amplitude squared",
         orders=(0, 2),
-        lookalikes=('stiffness', 'misalignment'),
+        lookalikes=('stiffness', 'misalignment', 'rub'),
     )
 )
 _to, _from = _identity(("h",))
@@ -419,7 +492,7 @@ register_effect(
         cause="the shaft's elastic restoring moment; 1 in the paper's units",
         signature="sets the critical speed sqrt(k); a wrong k leaves residual at the whirl",
         orders=(1,),
-        lookalikes=('nonlinear_stiffness', 'support_anisotropy'),
+        lookalikes=('nonlinear_stiffness', 'support_anisotropy', 'rub'),
     )
 )
 _to, _from = _identity(("tau",))
@@ -577,6 +650,43 @@ register_effect(
         "2x and 3x peaks); the always-open asymmetry has the 2x only",
         orders=(1, 2, 3),
         lookalikes=('asymmetry', 'misalignment'),
+    )
+)
+
+register_effect(
+    Effect(
+        name="rub",
+        parameters=(
+            Parameter("rub_stiffness", 0.5, "contact stiffness of the casing (seal) beyond the clearance, per "
+                      "unit shaft stiffness", 0.0, 20.0, "a casing pushes, never pulls (>= 0); a contact above 20 "
+                      "times the shaft's stiffness rings above 4.5x the natural frequency: an impact, not the "
+                      "smooth contact this model is", _NON_NEGATIVE),
+            Parameter("rub_friction", 0.2, "Coulomb friction coefficient of the contact (mu)", 0.0, 0.6,
+                      "friction opposes the slip (>= 0); dry rubbing pairs (steel on steel, seals, babbitt) lie "
+                      "between 0.1 and 0.6", _NON_NEGATIVE),
+            Parameter("rub_clearance", RUB_CLEARANCE, "radial clearance to the casing, as a tilt [rad]", 0.005,
+                      0.2, "a clearance below 0.005 rad is touched at slow roll (a tight fit, not a rub that comes "
+                      "and goes); above 0.2 rad no elastic shaft reaches it", (0.0, math.inf), scan_points=40),
+        ),
+        coefficients=("rub_contact", "rub_friction_moment"),
+        columns=_rub,
+        to_coefficients=_rub_to,
+        from_coefficients=_rub_from,
+        moment="-k_c max(|z| - clearance, 0) (1 + i mu sign(phid)) z/|z|",
+        cause="the disk (or a seal) touches the casing where the whirl exceeds the radial clearance: a radial "
+        "contact stiffness on the penetration and Coulomb friction against the shaft's sliding surface, which "
+        "pushes the rotor backward along its orbit",
+        signature="only while |theta| exceeds the clearance (around the critical and in the free whirl after "
+        "it): a stiffening (the critical moves up, the peak is cut flat) and a backward tangential moment along "
+        "the orbit; a light rub on the synchronous orbit leaves mostly 1x forward, a heavy one with enough "
+        "friction drives reverse whirl (-1x), and an off-centre orbit (a side load) touching once per turn "
+        "can lock into 1/2x; run-up and coast-down differ (the contact band depends on the sweep: the "
+        "stiffened branch is held longer going down)",
+        orders=(1, -1),
+        caveat="the clearance is found by a scan (the contact is non-linear in it); a contact that holds over "
+        "the whole record is a stiffness change plus a cross-coupling to these data, so a rub is named only "
+        "where the contact comes and goes",
+        lookalikes=("stiffness", "nonlinear_stiffness"),
     )
 )
 

@@ -91,8 +91,12 @@ def _orders(orders: Sequence[int]) -> str:
 
 def _parameter_row(p: Parameter) -> str:
     reason = p.bounds_reason or "(no physical bound declared)"
+    description = p.description
+    if p.scanned:
+        description += (f" (scanned: enters the columns non-linearly; the diagnosis tries {p.scan_points} values "
+                        "spaced geometrically over the plausible range, then refines around the best)")
     return (
-        f"| `{p.name}` | {_number(p.default)} | {_cell(p.description)} | "
+        f"| `{p.name}` | {_number(p.default)} | {_cell(description)} | "
         f"{_interval(p.lower, p.upper)} | {_cell(reason)} | {_interval(*p.domain)} |"
     )
 

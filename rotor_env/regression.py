@@ -76,6 +76,9 @@ class RegressionSpec:
     effects: tuple[str, ...] = DEFAULT_EFFECTS
     equation: str = "first"
     known: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    #: values of the estimated effects' scanned parameters (``{"rub": {"rub_clearance":
+    #: 0.04}}``; their defaults where absent): they shape the columns, they are not estimated
+    scanned: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     columns: tuple[str, ...] = field(init=False)
     groups: dict[str, tuple[str, ...]] = field(init=False)
     # per estimated effect, the indices of the effect's coefficients kept in eq 1 / eq 2
@@ -131,8 +134,18 @@ class RegressionSpec:
             groups[e] = names
         if len(set(columns)) != len(columns):
             raise ValueError(f"two effects share a coefficient name: {columns}")
+        scanned = {}
+        for name, vals in dict(self.scanned).items():
+            if name not in effects:
+                continue  # a scan value of an effect not in this model: not used
+            allowed = {p.name for p in EFFECTS[name].scanned_parameters}
+            unknown = set(vals) - allowed
+            if unknown:
+                raise ValueError(f"effect {name!r} scans {sorted(allowed)}, not {sorted(unknown)}")
+            scanned[name] = {k: float(v) for k, v in vals.items()}
         object.__setattr__(self, "effects", effects)
         object.__setattr__(self, "known", known)
+        object.__setattr__(self, "scanned", scanned)
         object.__setattr__(self, "columns", tuple(columns))
         object.__setattr__(self, "groups", groups)
         object.__setattr__(self, "_keep", tuple(keep))
@@ -167,11 +180,20 @@ class RegressionSpec:
             full[list(idx)] = theta[pos : pos + len(idx)]
             pos += len(idx)
             out.update(eff.from_coefficients(full))
+            out.update(zip((p.name for p in eff.scanned_parameters), self.scan_values(e), strict=True))
         return out
+
+    def scan_values(self, effect: str) -> tuple[float, ...]:
+        """The values of ``effect``'s scanned parameters the columns are built with."""
+        eff = EFFECTS[effect]
+        if effect in self.known:
+            return eff.scanned_values(self.known[effect])
+        return eff.scanned_values(self.scanned.get(effect))
 
     def builder(self):
         """The compiled row builder ``build(data, ip, known_coef, X, y)`` (cached)."""
-        key = (self.effects, self.equation, tuple(self.known), self._keep)
+        scan = tuple((e, self.scan_values(e)) for e in (*self.known, *self.effects) if EFFECTS[e].scanned_parameters)
+        key = (self.effects, self.equation, tuple(self.known), self._keep, scan)
         fn = _BUILDERS.get(key)
         if fn is None:
             fn = _compile_builder(self)
@@ -201,7 +223,9 @@ def _compile_builder(spec: RegressionSpec):
         nonlocal fi
         ns[f"f{fi}"] = njit(inline="always")(eff.columns)
         fi += 1
-        return f"        cy, cx = f{fi - 1}(phi, phid, phidd, thx, thy, wx, wy, ip)"
+        # scanned parameters (the rub's clearance) are constants of the builder (in its key)
+        extra = "".join(f", {v!r}" for v in spec.scan_values(eff.name))
+        return f"        cy, cx = f{fi - 1}(phi, phid, phidd, thx, thy, wx, wy, ip{extra})"
 
     kj = 0
     for name in spec.known:
@@ -318,14 +342,14 @@ def regression_arrays(
     y2 = data[:, 8] - ip * data[:, 2] * data[:, 7] - mom[:, 0]
     for name, vals in spec.known.items():
         eff = EFFECTS[name]
-        Xy, Xx = eff.regressors(*args)
+        Xy, Xx = eff.regressors(*args, scanned=vals)
         # one coefficient at a time, in the compiled builder's order: bit-identical rows
         for q, c in enumerate(eff.to_coefficients(vals)):
             y1 = y1 - float(c) * Xy[:, q]
             y2 = y2 - float(c) * Xx[:, q]
     blocks_y, blocks_x = [], []
     for name, idx in zip(spec.effects, spec._keep, strict=True):
-        Xy, Xx = EFFECTS[name].regressors(*args)
+        Xy, Xx = EFFECTS[name].regressors(*args, scanned=spec.scanned.get(name))
         blocks_y.append(Xy[:, list(idx)])
         blocks_x.append(Xx[:, list(idx)])
     X1, X2 = np.hstack(blocks_y), np.hstack(blocks_x)

@@ -111,6 +111,10 @@ def compile_accel(effects: tuple[str, ...]):
 
     It sums the gyroscopic terms and every smooth effect's columns times its
     coefficients (``coef``, in declaration order), generated from the declarations.
+    Each effect holds :attr:`~rotor_env.effects.Effect.kernel_width` slots of ``coef``:
+    its coefficients, then its scanned parameters' values (the rub's clearance), which
+    are arguments of its column function — values, not code: one compiled kernel (and
+    one cache entry, keyed by the effects) serves every clearance.
     """
     key = tuple(effects)
     if key in _ACCEL_CACHE:
@@ -127,11 +131,15 @@ def compile_accel(effects: tuple[str, ...]):
             namespace[f"f{i}"] = njit(inline="always")(eff.columns)
         except Exception as exc:  # pragma: no cover - numba's errors vary
             raise ValueError(f"effect {eff.name!r}: columns cannot be compiled: {exc}") from exc
-        lines.append(f"    cy, cx = f{i}(phi, phid, phidd, th_x, th_y, w_x, w_y, ip)")
-        for q in range(len(eff.coefficients)):
-            lines.append(f"    a_y += coef[{j}] * cy[{q}]")
-            lines.append(f"    a_x += coef[{j}] * cx[{q}]")
-            j += 1
+        nc = len(eff.coefficients)
+        # a scanned parameter (the rub's clearance) rides in the coefficient vector after
+        # the effect's coefficients and is passed to its column function
+        extra = "".join(f", coef[{j + nc + s}]" for s in range(len(eff.scanned_parameters)))
+        lines.append(f"    cy, cx = f{i}(phi, phid, phidd, th_x, th_y, w_x, w_y, ip{extra})")
+        for q in range(nc):
+            lines.append(f"    a_y += coef[{j + q}] * cy[{q}]")
+            lines.append(f"    a_x += coef[{j + q}] * cx[{q}]")
+        j += eff.kernel_width
     lines.append("    return a_y, a_x")
     bound = _file_backed_kernels(key, lines)
     if bound is not None:
@@ -373,8 +381,10 @@ class Simulator:
 
     def coefficients(self, t: float | None = None) -> tuple[np.ndarray, float]:
         eff = self.params.effects
+        # per effect its coefficients, then its scanned parameters (see compile_accel)
         coef = [c for e in smooth_effects(self.compiled_for)
-                for c in (self.params.coefficients(e.name, t) if e.name in eff else (0.0,) * len(e.coefficients))]
+                for c in ((*self.params.coefficients(e.name, t), *e.scanned_values(self.params.values))
+                          if e.name in eff else (0.0,) * e.kernel_width)]
         fr = friction_effect(eff)
         h = self.params.coefficients(fr.name, t)[0] if fr is not None else 0.0
         return np.array(coef, dtype=float), float(h)

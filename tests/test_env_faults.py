@@ -26,7 +26,7 @@ from rotor_env.simulator import simulate
 from rotor_env.wrappers import WRAPPER_EFFECTS, IdentificationWrapper
 
 FAULTS = {"shaft_bow": 0.5, "support_anisotropy": 0.5, "misalignment": 0.3, "cross_coupled_stiffness": 0.3,
-          "breathing_crack": 0.2}
+          "breathing_crack": 0.2, "rub": 0.3}
 
 
 def test_default_draw_is_unchanged():
@@ -68,6 +68,28 @@ def test_zero_control_equals_the_simulator(fault):
             break
     got = np.concatenate(chunks)
     ref = simulate(params, t_end=60.0, dt=0.01, run_up=0.01).data[1:]
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-8)
+
+
+def test_rub_in_contact_equals_the_simulator():
+    """A rub whose clearance the orbit crosses (the contact on, its clearance passed to the
+    env's kernel in the coefficient vector): still exactly the simulator's run."""
+    values = {"h": 0.0, "rub_stiffness": 0.8, "rub_friction": 0.3, "rub_clearance": 0.004}  # no dry-friction stick
+    params = RotorParams(effects=(*RotorParams().effects, "rub"), values=values)
+    env = RotorBalancingEnv(randomize=False, t_max=60.0, faults={"rub": 1.0})
+    env.reset(seed=0, options={"params": params})
+    chunks = []
+    while True:
+        _, _, te, tr, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+        chunks.append(info["measurements"])
+        if te or tr:
+            break
+    got = np.concatenate(chunks)
+    ref = simulate(params, t_end=60.0, dt=0.01, run_up=0.01).data[1:]
+    amp = np.hypot(ref[:, 4], ref[:, 5])
+    assert 0.1 < np.mean(amp > values["rub_clearance"]) < 0.9  # it touches, not all the time
+    free = simulate(RotorParams(values={"h": 0.0}), t_end=60.0, dt=0.01, run_up=0.01).data[1:]
+    assert np.abs(free[:, 4:6] - ref[:, 4:6]).max() > 1e-4  # and the contact changes the motion
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-8)
 
 

@@ -440,3 +440,59 @@ def test_cli_missing_directory(tmp_path, capsys):
     out = tmp_path / "nowhere" / "out.csv"
     code, _, err = _run_cli(capsys, out, "--t-end", 1)
     assert code == 2 and "does not exist" in err
+
+
+# ----------------------------------------------------------- the rub (a scanned parameter)
+#: a rotor with nothing but the rub: k = 0 and every other moment 0, so that the recorded
+#: acceleration at rest (w = 0: no gyroscopic moment) is the rub's moment alone
+_RUB_ONLY = {"k": 0.0, "tau": 0.0, "c": 0.0, "D": 0.0, "h": 0.0, "k30": 0.0, "k21": 0.0, "k12": 0.0,
+             "k03": 0.0, "load_y": 0.0, "load_x": 0.0}
+
+
+def _rub_by_hand(th_x, th_y, phid, k_c, mu, gap):
+    """``M_y + i M_x = -k_c max(|z| - gap, 0) (1 + i mu sign(phid)) z/|z|``, ``z = th_y + i th_x``."""
+    z = complex(th_y, th_x)
+    pen = max(abs(z) - gap, 0.0)
+    m = -k_c * pen * (1 + 1j * mu * math.copysign(1.0, phid)) * z / abs(z) if pen > 0 else 0j
+    return m.real, m.imag
+
+
+@pytest.mark.parametrize("compiled_for", [None, "library"])
+def test_rub_moment_by_hand(compiled_for):
+    """The simulator's rub moment (its own kernel and the whole library's, where the rub's
+    clearance rides in the coefficient vector after other effects) equals a hand computation
+    at states inside and beyond the clearance, forward and backward spin; none below it."""
+    k_c, mu, gap = 0.7, 0.25, 0.05
+    params = RotorParams(values={**_RUB_ONLY, "rub_stiffness": k_c, "rub_friction": mu, "rub_clearance": gap},
+                         effects=(*TABLE1.effects, "rub"))
+    sim = Simulator(params, compiled_for=tuple(EFFECTS) if compiled_for else None)
+    states = [(0.0, 0.08, 1.2), (0.06, -0.03, 1.2), (-0.05, -0.05, -0.7), (0.03, 0.02, 1.5), (0.0, 0.0, 1.0),
+              (0.0, 0.0499, 2.0)]
+    for th_x, th_y, phid in states:
+        row = sim._row(0.0, 0.3, phid, 0.0, np.array([th_x, th_y, 0.0, 0.0]), (0.0, 0.0))
+        ax, ay = row[8], row[9]
+        my, mx = _rub_by_hand(th_x, th_y, phid, k_c, mu, gap)
+        assert ay == pytest.approx(my, abs=1e-14) and ax == pytest.approx(mx, abs=1e-14), (th_x, th_y, phid)
+        if math.hypot(th_x, th_y) <= gap:
+            assert ay == 0.0 and ax == 0.0
+    # the friction of a forward-spinning shaft pushes the rotor backward along its orbit
+    my, mx = _rub_by_hand(0.0, 0.08, 1.2, k_c, mu, gap)
+    assert my < 0 and mx < 0  # at z = 0.08 (on the y axis) the forward tangent is +i: M_x < 0 is backward
+    Xy, Xx = EFFECTS["rub"].regressors(0.3, 1.2, 0.0, np.array([0.0]), np.array([0.08]), np.array([0.0]),
+                                       np.array([0.0]), 0.3, scanned={"rub_clearance": gap})
+    coef = EFFECTS["rub"].to_coefficients({"rub_stiffness": k_c, "rub_friction": mu})
+    assert (Xy @ coef)[0] == pytest.approx(my, abs=1e-14) and (Xx @ coef)[0] == pytest.approx(mx, abs=1e-14)
+
+
+def test_rub_beyond_the_orbit_changes_nothing():
+    """A clearance the orbit never reaches: the run is the rub-free one, sample for sample;
+    a clearance it reaches: the peak is cut."""
+    base = TABLE1.replace(**LINEAR)
+    free = simulate(base, t_end=200.0)
+    far = simulate(RotorParams(ip=base.ip, values={**base.values, "rub_stiffness": 0.5, "rub_clearance": 0.2 + 0.1},
+                               effects=(*base.effects, "rub")), t_end=200.0)
+    assert amplitude(free).max() < 0.3
+    np.testing.assert_array_equal(far.data, free.data)
+    near = simulate(RotorParams(ip=base.ip, values={**base.values, "rub_stiffness": 0.5, "rub_clearance": 0.05},
+                                effects=(*base.effects, "rub")), t_end=200.0)
+    assert amplitude(near).max() < 0.9 * amplitude(free).max()

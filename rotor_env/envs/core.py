@@ -32,13 +32,13 @@ __all__ = ["ENV_EFFECTS", "N_COEF", "N_OBS", "REASONS", "coef_layout", "kernels"
 #: The effects every environment rotor is built from (absent effects have coefficient 0).
 ENV_EFFECTS: tuple[str, ...] = PHYSICAL_EFFECTS
 _SMOOTH = smooth_effects(ENV_EFFECTS)
-N_COEF = sum(len(e.coefficients) for e in _SMOOTH)
+N_COEF = sum(e.kernel_width for e in _SMOOTH)
 #: Offset of each smooth effect's coefficients in ``coef``.
 COEF_OFFSET: dict[str, int] = {}
 _j = 0
 for _e in _SMOOTH:
     COEF_OFFSET[_e.name] = _j
-    _j += len(_e.coefficients)
+    _j += _e.kernel_width
 IDX_D = COEF_OFFSET["asymmetry"]
 
 
@@ -51,7 +51,7 @@ def coef_layout(effects: tuple[str, ...]) -> tuple[dict[str, int], int]:
     offsets, j = {}, 0
     for e in smooth_effects(tuple(effects)):
         offsets[e.name] = j
-        j += len(e.coefficients)
+        j += e.kernel_width  # its coefficients, then its scanned parameters (the rub's clearance)
     return offsets, j
 
 # dyn indices

@@ -30,6 +30,9 @@ fault                           parameters
 ``cross_coupled_stiffness``     U(0, 0.01)  (below the damping: the rotor stays stable)
 ``misalignment``                forward 2x U(0, 0.005), phase U(-pi, pi)
 ``breathing_crack``             dk U(0.02, 0.1), depth U(0.5, 1), phase U(-pi, pi)
+``rub``                         contact stiffness U(0.2, 1), friction U(0.1, 0.3),
+                                clearance U(0.1, 0.4) (inside the env's clearance 0.6:
+                                the casing is touched before the episode ends on "rub")
 ==============================  =====================================================
 
 Absent effects are left out of :attr:`RotorParams.effects` (so ``info["params"]`` says
@@ -103,6 +106,9 @@ FAULT_RANGES: dict[str, tuple[ParamRange, ...]] = {
     "breathing_crack": (ParamRange("dk_crack", 0.02, 0.1, "breathing_crack"),
                         ParamRange("breathing_depth", 0.5, 1.0, "breathing_crack"),
                         ParamRange("breathing_phase", -math.pi, math.pi, "breathing_crack")),
+    "rub": (ParamRange("rub_stiffness", 0.2, 1.0, "rub"),
+            ParamRange("rub_friction", 0.1, 0.3, "rub"),
+            ParamRange("rub_clearance", 0.1, 0.4, "rub")),
 }
 
 
@@ -175,7 +181,7 @@ def params_to_arrays(params: RotorParams, sensor_dt: float,
     for e in smooth_effects(tuple(effects)):
         if e.name in params.effects:
             j = offsets[e.name]
-            c = params.coefficients(e.name)
+            c = (*params.coefficients(e.name), *e.scanned_values(params.values))
             coef[j : j + len(c)] = c
     par = np.empty(N_PAR)
     par[P_H] = params.h if "structural_damping" in params.effects else 0.0
