@@ -33,7 +33,8 @@ length.  The raw columns come from :class:`~.stream.StreamReader` (CSV/Parquet, 
    over ``w_ref^2``, translation in :data:`~rotor_env.measurements.waveforms.LENGTH_UNIT`
    (mm) or tilt in rad; the rates by the stream's Savitzky-Golay ``_Derivatives`` (as
    ``derive_rates``).  The first revolution (where the filters start) is left out, and
-   at the end of the stream the last one, as in the batch path.
+   at the end of the stream the last one, as in the batch path (a row is handed out once
+   the stream is a turn past it).
 
 The decimation factor is fixed at the start (the batch path also caps it by the
 record's top speed, which a stream does not know ahead): it keeps 32 samples a turn up
@@ -326,8 +327,8 @@ class RigStream:
         self._dec: _Decimator | None = None
         self._deriv: _Derivatives | None = None
         self._phi_first = math.nan
-        self._phi_end = math.inf
         self._phi_last = math.nan
+        self._tail = np.zeros((0, len(COLUMNS)))  # rows that may still be in the last revolution
         self.q = 0
 
     @property
@@ -443,8 +444,6 @@ class RigStream:
             if math.isnan(self._phi_first):
                 self._phi_first = float(rows[0, 1])
             self._phi_last = float(rows[-1, 1])
-        if final:
-            self._phi_end = self._phi_last - 2 * math.pi
         out = np.zeros((rows.shape[0], len(COLUMNS)))
         out[:, 0] = rows[:, 0]  # s until the rows leave the derivative filter
         out[:, 1] = rows[:, 1]
@@ -455,9 +454,11 @@ class RigStream:
         out = self._deriv.push(out) if out.shape[0] else np.zeros((0, len(COLUMNS)))
         if final:
             out = np.concatenate([out, self._deriv.finish()])
-        # the first revolution (the filters start) and, at the end, the last are left out
-        keep = (out[:, 1] >= self._phi_first + 2 * math.pi) & (out[:, 1] <= self._phi_end)
-        out = out[keep]
+        # the first revolution (the filters start) and, at the end, the last are left out:
+        # a row goes once a row a turn later has been decimated (it is not in the last turn)
+        out = np.concatenate([self._tail, out[out[:, 1] >= self._phi_first + 2 * math.pi]])
+        n_out = int(np.searchsorted(out[:, 1], self._phi_last - 2 * math.pi, side="right"))
+        out, self._tail = out[:n_out], (out[n_out:] if not final else out[:0])
         if out.shape[0]:
             if self.clock is None:
                 self.clock = RigClock(self.natural_rpm, float(out[0, 0]))
