@@ -406,3 +406,45 @@ def test_vector_env_options_actions_and_render():
     frames = venv.render()
     assert len(frames) == 2 and frames[0].ndim == 3 and frames[0].dtype == np.uint8
     venv.close()
+
+
+_EPISODE_SCRIPT = """
+import json, sys
+import numpy as np
+import gymnasium as gym
+import rotor_env
+from rotor_env.envs.core import kernels
+env = gym.make(sys.argv[1])
+obs, _ = env.reset(seed=7)
+rows = [obs.tolist()]
+for k in range(25):
+    obs, r, term, trunc, info = env.step(np.full(env.action_space.shape, 0.5 if k % 2 else -0.3, np.float32))
+    rows.append([*obs.tolist(), float(r)])
+    if term or trunc:
+        break
+print(json.dumps({"rows": rows, "cached": kernels()._cached is not None}))
+"""
+
+
+def test_disk_cached_step_kernels_equal_the_in_memory_ones(tmp_path):
+    """The step kernels generated into the kernel cache (numba caches them on disk: no
+    compilation in a second process) step exactly as the ones compiled in memory."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    def run(**env):
+        proc = subprocess.run([sys.executable, "-c", _EPISODE_SCRIPT, "rotor_env/RotorBalancing-v0"],
+                              capture_output=True, text=True,
+                              timeout=600, env={**os.environ, "ROTOR_ID_CACHE_DIR": str(tmp_path), **env})
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        return json.loads(proc.stdout)
+
+    cached = run()
+    plain = run(ROTOR_ID_NO_KERNEL_CACHE="1")
+    assert cached["cached"] and not plain["cached"]
+    (source,) = (tmp_path / "kernels").glob("rotor_id_env_step_*.py")
+    # numba wrote its cache of the step kernels (index files beside the generated source)
+    assert list((tmp_path / "kernels" / "__pycache__").glob(f"{source.stem}.step_one-*.nbi"))
+    assert cached["rows"] == plain["rows"]
