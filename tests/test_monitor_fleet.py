@@ -1,7 +1,12 @@
-"""Many streams on Ray (``rotor_env.monitor.fleet``): each stream's events equal a plain
-single-process monitor's on the same file; a malformed stream errors alone."""
+"""Many streams on Ray (``rotor-id monitor A B ...``, ``rotor_env.monitor.fleet``): each
+stream's events equal a plain single-process monitor's on the same file; a malformed
+stream errors alone."""
 
 from __future__ import annotations
+
+import json
+import subprocess
+import sys
 
 import pytest
 
@@ -27,33 +32,36 @@ def streams(tmp_path_factory):
     return crack, bad
 
 
-def _plain(path) -> list[dict]:
+def _plain(path, **options) -> list[dict]:
     """The reference: one Monitor fed by the StreamReader in this process."""
     monitor, events = None, []
     for chunk in StreamReader(path):
         if monitor is None:
-            monitor = Monitor(MonitorConfig(**OPTIONS))
+            monitor = Monitor(MonitorConfig(**options))
         events.extend(monitor.update(chunk))
-    return [*events, monitor.summary()]
+    return json.loads(json.dumps([*events, monitor.summary()]))
 
 
-def test_streams_on_ray_equal_the_plain_monitor_and_a_bad_one_errors_alone(streams):
+def test_cli_several_files(streams):
+    """``rotor-id monitor A B --json-lines``: each stream's lines are the one-stream command's."""
     crack, bad = streams
-    seen: list[dict] = []
-    results = monitor_streams([str(crack), str(bad)], OPTIONS, workers=2, emit=seen.append)
-    by_stream = {str(crack): [], str(bad): []}
-    for e in seen:
-        by_stream[e["stream"]].append({k: v for k, v in e.items() if k != "stream"})
-    reference = _plain(crack)
-    assert by_stream[str(crack)] == reference
+    cmd = [sys.executable, "-m", "rotor_env.cli", "monitor", "--json-lines", "--arl0", "1e6"]
+    many = subprocess.run([*cmd, str(crack), str(bad)], capture_output=True, text=True, timeout=600)
+    assert many.returncode == 2, many.stderr[-2000:]  # one stream had an error
+    lines = [json.loads(x) for x in many.stdout.splitlines()]
+    mine = [{k: v for k, v in e.items() if k != "stream"} for e in lines if e["stream"] == str(crack)]
+    reference = _plain(crack, arl0=1e6, status_every=10.0)
+    assert mine == reference
     alarms = [e for e in reference if e["event"] in ("appeared", "changed")]
     assert [e["effect"] for e in alarms] == ["asymmetry"] and 250.0 <= alarms[0]["t_alarm"] < 260.0
-    res = {r["stream"]: r for r in results}
-    assert res[str(crack)]["error"] is None and res[str(crack)]["summary"]["alarms"] == 1
-    err = res[str(bad)]["error"]
-    assert err is not None and "line 9002" in err and "'x" in err
-    # the bad stream's state before its bad line is summarised, not lost
-    assert res[str(bad)]["summary"]["samples"] > 8000
+    errors = [e for e in lines if e["stream"] == str(bad) and e["event"] == "error"]
+    assert len(errors) == 1 and errors[0]["line"] == 9002 and "'x" in errors[0]["message"]
+    # the bad stream's samples before its bad line are summarised, not lost
+    (summary,) = [e for e in lines if e["stream"] == str(bad) and e["event"] == "summary"]
+    assert summary["samples"] > 8000
+    refused = subprocess.run([*cmd, "--report", "x.html", str(crack), str(bad)], capture_output=True, text=True,
+                             timeout=120)
+    assert refused.returncode != 0 and "--report" in refused.stderr
 
 
 def test_the_same_stream_twice_is_refused(streams):

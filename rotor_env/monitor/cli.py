@@ -21,7 +21,9 @@ def add_monitor_parser(sub) -> None:
         "stream holds a rig's SI waveforms (time in s, keyphasor or speed, probes), made dimensionless on the fly; "
         "events then carry s and rpm too.",
     )
-    p.add_argument("file", metavar="FILE|-", help="measurement file, or - for standard input")
+    p.add_argument("files", nargs="+", metavar="FILE|-",
+                   help="measurement file, or - for standard input; several files: each watched in its own Ray task "
+                        "(events tagged with their stream, merged as they arrive)")
     p.add_argument("--rig", metavar="RIG.yaml", help="FILE holds a rig's SI waveforms described by this rig file "
                    "(docs/MEASUREMENTS.md); needs --natural-rpm")
     p.add_argument("--natural-rpm", type=float, metavar="N", help="with --rig: the rotor's natural frequency in rpm, "
@@ -47,6 +49,9 @@ def add_monitor_parser(sub) -> None:
     p.add_argument("--state", metavar="OUT.npz", help="save the monitor's state at the end (resume with --resume)")
     p.add_argument("--resume", metavar="STATE.npz", help="continue from a saved state")
     p.add_argument("--force", action="store_true", help="overwrite --report / --state")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="several files: Ray CPUs on this machine (default: one per stream, so live streams keep up)")
+    p.add_argument("--address", metavar="ADDR", help="several files: a Ray cluster's address (default: local Ray)")
     p.set_defaults(func=run_monitor)
 
 
@@ -75,7 +80,7 @@ def run_monitor(args: argparse.Namespace) -> int:
     from ..io import MeasurementError
     from ..outputs import check_writable
     from .core import Monitor
-    from .stream import StreamReader
+    from .fleet import open_stream
 
     rig = None
     if args.rig:
@@ -84,9 +89,17 @@ def run_monitor(args: argparse.Namespace) -> int:
 
         if args.natural_rpm is None:
             raise ValueError(natural_rpm_required())
+        if args.resume:
+            raise ValueError("--resume with --rig: a rig stream's time starts at its first whole revolution, so a "
+                             "saved monitor cannot continue on another rig file; monitor the whole stream")
         rig = load_rig(args.rig)
     elif args.natural_rpm is not None:
         raise ValueError("--natural-rpm goes with --rig RIG.yaml (SI rig data); a dimensionless stream has no time scale")
+    if len(args.files) > 1:
+        return _run_many(args, rig)
+    if args.workers is not None or args.address:
+        raise ValueError("--workers/--address are for several streams (one Ray task each); one stream runs here")
+    args.file = args.files[0]
     if args.report:
         check_writable(args.report, overwrite=args.force)
     if args.state:
@@ -106,14 +119,8 @@ def run_monitor(args: argparse.Namespace) -> int:
         else:
             print(json.dumps(event), flush=True)
 
-    if rig is not None:
-        from .rig_stream import RigStream
-
-        reader = RigStream(args.file, rig, args.natural_rpm, follow=args.follow, idle_exit=args.idle_exit)
-        ip, scale = rig.ip, reader.w_ref
-    else:
-        reader = StreamReader(args.file, follow=args.follow, idle_exit=args.idle_exit)
-        ip, scale = 0.3, 1.0
+    reader, ip, scale = open_stream(args.file, rig=rig, natural_rpm=args.natural_rpm, follow=args.follow,
+                                    idle_exit=args.idle_exit)
     monitor = Monitor.load(args.resume) if args.resume else None
     status = 0
     try:
@@ -151,3 +158,54 @@ def run_monitor(args: argparse.Namespace) -> int:
         write_report(monitor, args.report, source=reader.name, overwrite=args.force,
                      clock=getattr(reader, "clock", None))
     return status
+
+
+class _StreamConfig:
+    """``(dt, ip, time scale) -> MonitorConfig`` from the command's options (sent to Ray tasks)."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        self.args = argparse.Namespace(**vars(args))
+        self.args.func = None  # the namespace travels to the workers
+
+    def __call__(self, dt: float, ip: float, time_scale: float):
+        return _config(self.args, dt, ip=ip, time_scale=time_scale)
+
+
+def _run_many(args: argparse.Namespace, rig) -> int:
+    """Several streams: one Ray task each (:mod:`rotor_env.monitor.fleet`), JSON lines or a
+    line per event; a table of the streams at the end."""
+    from .fleet import monitor_streams
+
+    refused = [o for o, v in (("--report", args.report), ("--state", args.state), ("--resume", args.resume)) if v]
+    if refused:
+        raise ValueError(f"{', '.join(refused)}: for one stream; with several, run them one by one")
+    if "-" in args.files:
+        raise ValueError("standard input (-) is one stream: give files when watching several")
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    workers = args.workers if args.workers is not None else len(args.files)
+
+    def emit(event: dict) -> None:
+        if args.json_lines:
+            print(json.dumps(event), flush=True)
+        elif event["event"] in ("appeared", "changed", "disappeared", "error"):
+            t = event.get("t_alarm_s", event.get("t_alarm"))
+            unit = " s" if "t_alarm_s" in event else ""
+            what = event.get("effect") or event.get("message")
+            when = f" at t = {t:.6g}{unit}" if t is not None else ""
+            print(f"{event['stream']}: {event['event']} {what}{when}", flush=True)
+
+    try:
+        results = monitor_streams(args.files, _StreamConfig(args), rig=rig, natural_rpm=args.natural_rpm,
+                                  follow=args.follow, idle_exit=args.idle_exit, workers=workers,
+                                  address=args.address, emit=emit)
+    except KeyboardInterrupt:
+        return 130
+    if not args.json_lines:
+        print("\n| stream | samples | alarms | events | error |\n|---|---|---|---|---|")
+        for r in results:
+            s = r["summary"] or {}
+            evs = ", ".join(f"{e['event']} {e['effect']} (t {e['t_alarm']:.6g})" for e in s.get("events", []))
+            print(f"| {r['stream']} | {s.get('samples', 0)} | {s.get('alarms', 0)} | {evs or '—'} | "
+                  f"{r['error'] or ''} |")
+    return 2 if any(r["error"] for r in results) else 0

@@ -22,45 +22,69 @@ from pathlib import Path
 
 from ..io import MeasurementError
 
-__all__ = ["monitor_streams", "watch_stream"]
+__all__ = ["monitor_streams", "open_stream", "watch_stream"]
 
 
-def watch_stream(source: str, options: dict, *, window_time: float | None = None, follow: bool = False,
+def open_stream(source, *, rig=None, natural_rpm: float | None = None, follow: bool = False,
+                idle_exit: float | None = None):
+    """``(reader, ip, time scale)``: a dimensionless :class:`~rotor_env.monitor.stream.StreamReader`,
+    or with ``rig`` a :class:`~rotor_env.monitor.rig_stream.RigStream` (its ``clock`` turns the
+    monitor's times and speeds back to s and rpm; options in seconds scale by ``w_ref``)."""
+    if rig is None:
+        from .stream import StreamReader
+
+        return StreamReader(source, follow=follow, idle_exit=idle_exit), 0.3, 1.0
+    from .rig_stream import RigStream, natural_rpm_required
+
+    if natural_rpm is None:
+        raise ValueError(natural_rpm_required())
+    reader = RigStream(source, rig, natural_rpm, follow=follow, idle_exit=idle_exit)
+    return reader, rig.ip, reader.w_ref
+
+
+def watch_stream(source: str, config, *, rig=None, natural_rpm: float | None = None, follow: bool = False,
                  idle_exit: float | None = None, name: str | None = None) -> Iterator[dict]:
-    """The events of one stream (each tagged ``stream``), then its summary or its error.
+    """The events of one stream (each tagged ``stream``; with ``rig``, with s and rpm too),
+    then its summary, or an ``error`` event naming the bad line and then the summary of
+    the samples before it.
 
-    ``options``: :class:`~rotor_env.monitor.core.MonitorConfig` fields; ``window_time``:
-    a sliding window in time units (turned into samples once the stream's step is known).
+    ``config``: a :class:`~rotor_env.monitor.core.MonitorConfig`'s fields as a dict, or
+    ``config(dt, ip, time_scale) -> MonitorConfig`` when the options depend on the
+    stream's step (a window in time units; what ``rotor-id monitor`` passes).
     """
     from .core import Monitor, MonitorConfig
-    from .stream import StreamReader
 
     name = name or str(source)
     monitor = None
     reader = None
+
+    def tag(event: dict) -> dict:
+        clock = getattr(reader, "clock", None)
+        return {"stream": name, **(clock.annotate(event) if clock is not None else event)}
+
     try:
-        reader = StreamReader(source, follow=follow, idle_exit=idle_exit)
+        reader, ip, scale = open_stream(source, rig=rig, natural_rpm=natural_rpm, follow=follow,
+                                        idle_exit=idle_exit)
         for chunk in reader:
             if monitor is None:
                 dt = float(chunk[1, 0] - chunk[0, 0]) if chunk.shape[0] > 1 else 0.01
-                opts = dict(options)
-                if window_time is not None:
-                    opts["window"] = max(int(opts.get("block", 200)), int(round(window_time / dt)))
-                monitor = Monitor(MonitorConfig(**opts))
+                cfg = config(dt, ip, scale) if callable(config) else MonitorConfig(**{"ip": ip, **config})
+                monitor = Monitor(cfg)
             for event in monitor.update(chunk):
-                yield {"stream": name, **event}
+                yield tag(event)
     except MeasurementError as exc:
-        yield {"stream": name, "event": "error", "message": str(exc),
-               "line": (reader.line + 1) if reader is not None else None,
-               "samples": monitor.samples if monitor is not None else 0}
+        line = getattr(reader, "error_line", None) or (reader.line + 1 if reader is not None else None)
+        yield tag({"event": "error", "message": str(exc), "line": line,
+                   "samples": monitor.samples if monitor is not None else 0})
     if monitor is not None:
-        yield {"stream": name, **monitor.summary()}
+        yield tag(monitor.summary())
 
 
-def monitor_streams(sources: list[str], options: dict, *, window_time: float | None = None, follow: bool = False,
-                    idle_exit: float | None = None, workers: int = 1, address: str | None = None,
-                    emit: Callable[[dict], None] = print) -> list[dict]:
-    """Watch every source in its own Ray task; ``emit`` each event as it arrives.
+def monitor_streams(sources: list[str], config, *, rig=None, natural_rpm: float | None = None,
+                    follow: bool = False, idle_exit: float | None = None, workers: int = 1,
+                    address: str | None = None, emit: Callable[[dict], None] = print) -> list[dict]:
+    """Watch every source in its own Ray task (:func:`watch_stream`; ``config`` as there);
+    ``emit`` each event as it arrives.
 
     Returns per stream ``{"stream", "summary", "error"}`` (the summary covers the
     samples before an error).  Streams are named by their path; two sources with the
@@ -79,7 +103,8 @@ def monitor_streams(sources: list[str], options: dict, *, window_time: float | N
         remote = ray.remote(num_cpus=1, max_retries=0)(watch_stream)
         gens = {}
         for src, name in zip(sources, names, strict=True):
-            g = remote.remote(src, options, window_time=window_time, follow=follow, idle_exit=idle_exit, name=name)
+            g = remote.remote(src, config, rig=rig, natural_rpm=natural_rpm, follow=follow, idle_exit=idle_exit,
+                              name=name)
             gens[g] = name
         results = {n: {"stream": n, "summary": None, "error": None} for n in names}
         pending = list(gens)
