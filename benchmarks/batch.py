@@ -28,6 +28,8 @@ import time
 from pathlib import Path
 
 BIN = Path(sys.executable).parent
+#: the command line tool; ``python -m rotor_env.cli`` where the package is on the path but not installed
+ROTOR_ID = [str(BIN / "rotor-id")] if (BIN / "rotor-id").exists() else [sys.executable, "-m", "rotor_env.cli"]
 
 
 def make_fleet(folder: Path, n: int) -> None:
@@ -104,7 +106,7 @@ def main() -> None:
     runs = [("cluster", None)] if args.address else [(f"ray, {w} worker{'s' * (w > 1)}", w) for w in counts]
     for name, w in runs:
         out = work / f"results_{w or 'cluster'}"
-        cmd = [str(BIN / "rotor-id"), "batch", str(fleet), "--out", str(out)]
+        cmd = [*ROTOR_ID, "batch", str(fleet), "--out", str(out)]
         cmd += ["--address", args.address] if args.address else ["--workers", str(w)]
         wall = timed(cmd)
         import pyarrow.parquet as pq
