@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..measurements.vectors import fit_orders, keyphasor_times, order_track
 from .orders import order_map
 
 __all__ = [
@@ -97,88 +98,25 @@ def _axes(ax, n: int, figsize=(8, 4), **kw):
 
 
 # ------------------------------------------------------------------ order tracking
-def _keyphasor_times(t: np.ndarray, phi: np.ndarray, revolutions: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """``(times, angles)`` where ``phi`` crosses a multiple of ``2 pi`` (the keyphasor mark),
-    every ``revolutions`` turns, interpolated between samples; counted with the rotation
-    (a shaft turning backwards crosses them downwards)."""
-    sign = 1.0 if phi[-1] >= phi[0] else -1.0
-    psi = np.maximum.accumulate(sign * phi)  # monotone: brief reversals held (encoder noise)
-    step = 2 * math.pi * revolutions
-    first = math.ceil(psi[0] / (2 * math.pi) - 1e-12) * 2 * math.pi
-    marks = np.arange(first, psi[-1] + 1e-12, step)
-    if marks.size == 0:
-        return np.empty(0), np.empty(0)
-    # psi may hold flat stretches: interpolate on the strictly increasing samples
-    keep = np.concatenate([[True], np.diff(psi) > 0])
-    return np.interp(marks, psi[keep], t[keep]), sign * marks
-
-
 def order_vectors(
     t: np.ndarray, x: np.ndarray, phi: np.ndarray, orders: Sequence[int] = (1,), revolutions: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray, dict[int, np.ndarray]]:
     """Per-revolution order-tracked vectors: ``(t_mid, speed, {order: X})``.
 
-    Between consecutive keyphasor marks (``phi`` a multiple of ``2 pi``, every
-    ``revolutions`` turns) the samples are fitted by least squares with a constant and
-    the ``orders``: a real channel as ``x ≈ a0 + sum_n Re(X_n e^{i n phi})`` (the lead
-    convention), a complex one (``z = th_y + i th_x``) as ``z ≈ a0 + sum_n X_n e^{i n phi}``
-    with signed orders (``-1``: backward).  The fit uses the sampled ``phi`` itself, so an
-    accelerating shaft (samples not uniform in angle) is exact for a signal made of these
-    orders; each sample weighted by the angle it covers, it is otherwise the DFT against
-    ``phi`` (orders not fitted leak in only to the trapezoid's accuracy).  ``speed`` is the mean
-    speed of each revolution, ``2 pi revolutions / (t_b - t_a)`` in rad per time unit;
-    ``t_mid`` the middle of it.  A block with too few samples gives NaN.
+    :func:`rotor_env.measurements.vectors.order_track` with ``method="lstsq"``: between
+    consecutive keyphasor marks (``phi`` a multiple of ``2 pi``, every ``revolutions``
+    turns) the samples are fitted by least squares with a constant and the ``orders``: a
+    real channel as ``x ≈ a0 + sum_n Re(X_n e^{i n phi})`` (the lead convention), a complex
+    one (``z = th_y + i th_x``) as ``z ≈ a0 + sum_n X_n e^{i n phi}`` with signed orders
+    (``-1``: backward).  The fit uses the sampled ``phi`` itself, so an accelerating shaft
+    (samples not uniform in angle) is exact for a signal made of these orders; each sample
+    weighted by the angle it covers, it is otherwise the DFT against ``phi`` (orders not
+    fitted leak in only to the trapezoid's accuracy).  ``speed`` is the mean speed of each
+    revolution, ``2 pi revolutions / (t_b - t_a)`` in rad per time unit; ``t_mid`` the
+    middle of it.  A block with too few samples gives NaN.
     """
-    t = np.asarray(t, dtype=float)
-    phi = np.asarray(phi, dtype=float)
-    x = np.asarray(x)
-    real = not np.iscomplexobj(x)
-    orders = [int(o) for o in orders]
-    if real and any(o <= 0 for o in orders):
-        raise ValueError(f"a real channel has positive orders only, got {orders}")
-    times, marks = _keyphasor_times(t, phi, revolutions)
-    n_blocks = max(len(times) - 1, 0)
-    out = {o: np.full(n_blocks, np.nan + 0j) for o in orders}
-    t_mid = 0.5 * (times[1:] + times[:-1]) if n_blocks else np.empty(0)
-    speed = np.abs(np.diff(marks)) / np.diff(times) if n_blocks else np.empty(0)
-    bounds = np.searchsorted(t, times)
-    for j in range(n_blocks):
-        a, b = bounds[j], bounds[j + 1]
-        fitted = _fit_orders(phi[a:b], x[a:b], orders, (marks[j], marks[j + 1]))
-        for o in orders:
-            out[o][j] = fitted[o]
-    return t_mid, speed, out
-
-
-def _fit_orders(phi: np.ndarray, x: np.ndarray, orders: Sequence[int],
-                span: tuple[float, float] | None = None) -> dict[int, complex]:
-    """Least squares of the samples against a constant and the ``orders`` of ``phi``: a
-    real ``x ≈ a0 + sum Re(X_n e^{i n phi})``, a complex ``x ≈ a0 + sum X_n e^{i n phi}``
-    (order 0 is ``a0``).  ``span``: the block's end angles (the keyphasor marks), so the
-    weights cover the whole block.  NaN with too few samples."""
-    real = not np.iscomplexobj(x)
-    n_cols = 1 + (2 if real else 1) * len([o for o in orders if o != 0])
-    if len(x) < n_cols + 2:
-        return {o: complex(np.nan, np.nan) for o in orders}
-    # each sample weighted by the angle it stands for (trapezoid in phi): on an accelerating
-    # shaft the samples crowd at the start of a turn, and unweighted, the orders not fitted
-    # (2X when fitting 1X) would leak in; weighted, the fit is the DFT against phi
-    lo, hi = span if span is not None else (phi[0], phi[-1])
-    edges = np.concatenate([[lo], 0.5 * (phi[1:] + phi[:-1]), [hi]])
-    sw = np.sqrt(np.abs(np.diff(edges)))[:, None]
-    if real:
-        cols = [np.ones(len(x))]
-        for o in orders:
-            cols += [np.cos(o * phi), -np.sin(o * phi)]  # Re(X e^{i o phi}) = Re X cos - Im X sin
-        coef, *_ = np.linalg.lstsq(np.column_stack(cols) * sw, x * sw[:, 0], rcond=None)
-        return {o: complex(coef[1 + 2 * q], coef[2 + 2 * q]) for q, o in enumerate(orders)}
-    moving = [o for o in orders if o != 0]
-    A = np.column_stack([np.ones(len(x))] + [np.exp(1j * o * phi) for o in moving])
-    coef, *_ = np.linalg.lstsq(A * sw, x.astype(complex) * sw[:, 0], rcond=None)
-    out = {o: complex(coef[1 + q]) for q, o in enumerate(moving)}
-    if 0 in orders:
-        out[0] = complex(coef[0])
-    return out
+    track = order_track(t, x, phi, tuple(orders), revolutions, method="lstsq")
+    return track.t, track.speed, track.vectors
 
 
 def phase_deg(X: np.ndarray, convention: str = "lag", *, unwrap: bool = True,
@@ -374,7 +312,7 @@ def plot_orbit(
             raise ValueError(f"give one axes or one per time ({len(at_times)}), got {len(axes)}")
         fig = axes[0].figure
         axes = axes * len(at_times) if len(axes) == 1 else axes
-    times, marks = _keyphasor_times(t, phi)
+    times, marks = keyphasor_times(t, phi)
     turning = 1.0 if phi[-1] >= phi[0] else -1.0
     for k, (tc, a) in enumerate(zip(at_times, axes, strict=True)):
         if len(times) < 2:
@@ -387,7 +325,7 @@ def plot_orbit(
         speed = float(speed_from_rad(abs(marks[j + 1] - marks[j]) / (tb - ta), speed_unit))
         # the 1X fit on the samples themselves (the interpolated ends only close the curve)
         ends = (marks[j], marks[j + 1])
-        X, Y = _fit_orders(phi[sel], x[sel], (1,), ends)[1], _fit_orders(phi[sel], y[sel], (1,), ends)[1]
+        X, Y = fit_orders(phi[sel], x[sel], (1,), ends)[1], fit_orders(phi[sel], y[sel], (1,), ends)[1]
         colour = f"C{k}" if len(set(map(id, axes))) == 1 else "C0"
         when = f"t = {tc:.4g} {'' if time_unit == 'dimensionless' else time_unit}".rstrip()
         tag = f"{when}, {speed:.4g} {'(speed)' if speed_unit == 'dimensionless' else speed_unit}"

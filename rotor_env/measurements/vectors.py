@@ -23,6 +23,12 @@ coefficient in the shaft angle
 (trapezoidal rule in ``phi``, so a sweep's changing speed needs no resampling).  For
 ``x = Re(X e^{i n phi})`` it returns ``X`` exactly; other orders average out over whole
 revolutions.  The block's speed is its angle over its duration, its time the middle.
+
+``order_track(..., method="lstsq")`` fits the samples of each revolution (between
+keyphasor marks, :func:`keyphasor_times`) by least squares with a constant and the
+requested orders (:func:`fit_orders`): exact for a signal made of those orders, the
+trapezoid's DFT otherwise.  The plots read it (:mod:`rotor_env.diagnosis.field_plots`);
+the identification reads the trapezoid.
 """
 
 from __future__ import annotations
@@ -40,7 +46,9 @@ __all__ = [
     "OrderTrack",
     "VectorTable",
     "VectorTableError",
+    "fit_orders",
     "from_phase",
+    "keyphasor_times",
     "load_vector_table",
     "order_track",
     "to_phase",
@@ -94,6 +102,7 @@ def order_track(
     *,
     at: np.ndarray | None = None,
     upsample: int = 1,
+    method: str = "trapezoid",
 ) -> OrderTrack:
     """Per-revolution Fourier coefficients of ``x`` (1-D, or 2-D with a signal per column).
 
@@ -102,7 +111,16 @@ def order_track(
     those angles.  Blocks that do not fit in the record are left out.  A complex signal
     (``x + i y``) is its own analytic form: its vectors use ``1 / (2 pi R)`` (``z = Z e^{i n phi}``
     gives ``Z``).  ``upsample``: cubic interpolation to that many points per sample first.
+
+    ``method``: ``"trapezoid"`` (the module docstring) or ``"lstsq"``: each block's samples
+    fitted by least squares (:func:`fit_orders`) between the keyphasor marks
+    (:func:`keyphasor_times`; a shaft turning backwards is tracked too, ``revolutions``
+    may be any positive number), a real channel with positive ``orders`` only, a complex
+    one with signed orders (``-1``: backward) and ``0`` (the mean); a block with too few
+    samples gives NaN.  ``at`` and ``upsample`` go with the trapezoid only.
     """
+    if method not in ("trapezoid", "lstsq"):
+        raise ValueError(f"method must be 'trapezoid' or 'lstsq', got {method!r}")
     t = np.asarray(t, dtype=float)
     phi = np.asarray(phi, dtype=float)
     x = np.asarray(x)
@@ -110,6 +128,10 @@ def order_track(
     xs = x[:, None] if one else x
     if len(t) != len(phi) or len(t) != xs.shape[0]:
         raise ValueError("t, x and phi must have the same number of samples")
+    if method == "lstsq":
+        if at is not None or upsample != 1:
+            raise ValueError("order_track: 'at' and 'upsample' go with method='trapezoid'")
+        return _track_lstsq(t, xs, phi, orders, revolutions, one)
     if upsample > 1:
         # cubic interpolation between the samples: the trapezoid's error on what is not a
         # whole number of orders in a block (a free whirl beating against 1X) falls as h^4
@@ -154,6 +176,77 @@ def order_track(
     if one:
         out = {n: v[:, 0] for n, v in out.items()}
     return OrderTrack(t_mid, speed, out)
+
+
+def keyphasor_times(t: np.ndarray, phi: np.ndarray, revolutions: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """``(times, angles)`` where ``phi`` crosses a multiple of ``2 pi`` (the keyphasor mark),
+    every ``revolutions`` turns, interpolated between samples; counted with the rotation
+    (a shaft turning backwards crosses them downwards)."""
+    sign = 1.0 if phi[-1] >= phi[0] else -1.0
+    psi = np.maximum.accumulate(sign * phi)  # monotone: brief reversals held (encoder noise)
+    step = 2 * math.pi * revolutions
+    first = math.ceil(psi[0] / (2 * math.pi) - 1e-12) * 2 * math.pi
+    marks = np.arange(first, psi[-1] + 1e-12, step)
+    if marks.size == 0:
+        return np.empty(0), np.empty(0)
+    # psi may hold flat stretches: interpolate on the strictly increasing samples
+    keep = np.concatenate([[True], np.diff(psi) > 0])
+    return np.interp(marks, psi[keep], t[keep]), sign * marks
+
+
+def _track_lstsq(t: np.ndarray, xs: np.ndarray, phi: np.ndarray, orders, revolutions: float,
+                 one: bool) -> OrderTrack:
+    """:func:`order_track` with ``method="lstsq"``: :func:`fit_orders` between consecutive
+    keyphasor marks.  ``speed`` is ``2 pi revolutions / (t_b - t_a)`` (positive either way
+    round), ``t`` the block's middle."""
+    orders = [int(o) for o in orders]
+    if not np.iscomplexobj(xs) and any(o <= 0 for o in orders):
+        raise ValueError(f"a real channel has positive orders only, got {orders}")
+    times, marks = keyphasor_times(t, phi, revolutions)
+    n_blocks = max(len(times) - 1, 0)
+    out = {o: np.full((n_blocks, xs.shape[1]), np.nan + 0j) for o in orders}
+    t_mid = 0.5 * (times[1:] + times[:-1]) if n_blocks else np.empty(0)
+    speed = np.abs(np.diff(marks)) / np.diff(times) if n_blocks else np.empty(0)
+    bounds = np.searchsorted(t, times)
+    for j in range(n_blocks):
+        a, b = bounds[j], bounds[j + 1]
+        for s in range(xs.shape[1]):
+            fitted = fit_orders(phi[a:b], xs[a:b, s], orders, (marks[j], marks[j + 1]))
+            for o in orders:
+                out[o][j, s] = fitted[o]
+    if one:
+        out = {o: v[:, 0] for o, v in out.items()}
+    return OrderTrack(t_mid, speed, out)
+
+
+def fit_orders(phi: np.ndarray, x: np.ndarray, orders, span: tuple[float, float] | None = None) -> dict[int, complex]:
+    """Least squares of the samples against a constant and the ``orders`` of ``phi``: a
+    real ``x ≈ a0 + sum Re(X_n e^{i n phi})``, a complex ``x ≈ a0 + sum X_n e^{i n phi}``
+    (order 0 is ``a0``).  ``span``: the block's end angles (the keyphasor marks), so the
+    weights cover the whole block.  NaN with too few samples."""
+    real = not np.iscomplexobj(x)
+    n_cols = 1 + (2 if real else 1) * len([o for o in orders if o != 0])
+    if len(x) < n_cols + 2:
+        return {o: complex(np.nan, np.nan) for o in orders}
+    # each sample weighted by the angle it stands for (trapezoid in phi): on an accelerating
+    # shaft the samples crowd at the start of a turn, and unweighted, the orders not fitted
+    # (2X when fitting 1X) would leak in; weighted, the fit is the DFT against phi
+    lo, hi = span if span is not None else (phi[0], phi[-1])
+    edges = np.concatenate([[lo], 0.5 * (phi[1:] + phi[:-1]), [hi]])
+    sw = np.sqrt(np.abs(np.diff(edges)))[:, None]
+    if real:
+        cols = [np.ones(len(x))]
+        for o in orders:
+            cols += [np.cos(o * phi), -np.sin(o * phi)]  # Re(X e^{i o phi}) = Re X cos - Im X sin
+        coef, *_ = np.linalg.lstsq(np.column_stack(cols) * sw, x * sw[:, 0], rcond=None)
+        return {o: complex(coef[1 + 2 * q], coef[2 + 2 * q]) for q, o in enumerate(orders)}
+    moving = [o for o in orders if o != 0]
+    A = np.column_stack([np.ones(len(x))] + [np.exp(1j * o * phi) for o in moving])
+    coef, *_ = np.linalg.lstsq(A * sw, x.astype(complex) * sw[:, 0], rcond=None)
+    out = {o: complex(coef[1 + q]) for q, o in enumerate(moving)}
+    if 0 in orders:
+        out[0] = complex(coef[0])
+    return out
 
 
 # ------------------------------------------------------------------ vector tables
