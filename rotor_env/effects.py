@@ -680,8 +680,8 @@ register_effect(
         "it): a stiffening (the critical moves up, the peak is cut flat) and a backward tangential moment along "
         "the orbit; a light rub on the synchronous orbit leaves mostly 1x forward, a heavy one with enough "
         "friction drives reverse whirl (-1x), and an off-centre orbit (a side load) touching once per turn "
-        "can lock into 1/2x; run-up and coast-down differ (the contact band depends on the sweep: the "
-        "stiffened branch is held longer going down)",
+        "can lock into 1/2x; run-up and coast-down differ (the response trails the sweep: the contact band "
+        "lies above the critical running up, below it coasting down; a hard rub adds a jump)",
         orders=(1, -1),
         caveat="the clearance is found by a scan (the contact is non-linear in it); a contact that holds over "
         "the whole record is a stiffness change plus a cross-coupling to these data, so a rub is named only "

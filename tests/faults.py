@@ -6,7 +6,9 @@ has dry friction).  No library effect describes the fault, so the right answer i
 ``partly_explained`` or ``unexplained``, never a library effect added in its place.
 
 Every generator is built on the project's simulator.  A fault that is a *moment* is a
-test-only :class:`rotor_env.effects.Effect` named ``undeclared_*``; it is registered
+test-only :class:`rotor_env.effects.Effect` named ``undeclared_*`` (the bow, the 2x
+forcing, the anisotropy and the rub are declared by the library too since: their own code
+here checks the library's effects); it is registered
 only while its run is simulated (:func:`_registered`) and removed again, so the
 diagnosis never sees it in the registry and other test modules do not either.  The
 probe runout is a *measurement* fault: it is added to a clean simulated run before the
@@ -151,6 +153,7 @@ RUB_FRICTION = 0.2
 
 
 def _rub_columns(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
+    # this module's own code for the library's ``rub`` (fixed gap and mu, forward spin only):
     # radial contact beyond the clearance, friction against the forward-turning surface:
     # M_y + i M_x = -k_c max(|z| - gap, 0) (1 + i mu) z/|z|
     r = np.sqrt(th_x * th_x + th_y * th_y) + 1e-12
@@ -388,7 +391,9 @@ def loose_pedestal(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, 
 
 def rub(seed: int | None, noise: float = NOISE, rotor: Rotor = BASE, run_up: RunUp = RUN_UP,
         t_end: float = 400.0, dt: float = 0.01, k_contact: float = 0.5) -> Measurements:
-    """A rub against the casing.
+    """A rub against the casing (the library declares it now: ``rub``; simulated here with
+    this module's own column code, the gap ``RUB_GAP`` and friction ``RUB_FRICTION`` fixed,
+    to check the library's effect against an independent implementation).
 
     Cause: near the critical speed the whirl exceeds the radial clearance ``RUB_GAP`` and
     the disk touches the casing: a contact stiffness ``k_contact`` on the penetration

@@ -463,3 +463,36 @@ def test_order_map_counts_orders_with_the_rotation(direction):
     assert orders[np.argmax(mean)] == 1.0
     assert at[1.0] == pytest.approx(0.5, rel=0.05) and at[-2.0] == pytest.approx(0.2, rel=0.05)
     assert at[-1.0] < 0.01 and at[2.0] < 0.01  # nothing in the mirrored orders
+
+
+# ------------------------------------------------------------ the clearance scan
+#: the scan finds the clearance within this relative error (noise 5e-4)
+CLEARANCE_TOLERANCE = 0.02
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_clearance_scan_finds_the_true_clearance(seed):
+    """The rub's clearance enters its columns non-linearly: the candidate scan (geometric
+    grid over its plausible bounds, then a fine scan) finds it within 2 % on a noisy run-up,
+    pays for the values it tried, and the clearance found is what later fits use."""
+    from rotor_env.diagnosis.candidates import _scan_parameters
+    from rotor_env.diagnosis.compare import _Data, _known, compare
+
+    truth = {"rub_stiffness": 0.8, "rub_friction": 0.15, "rub_clearance": 0.05}
+    zero = {p.name: 0.0 for e in PHYSICAL_EFFECTS for p in EFFECTS[e].parameters}
+    params = RotorParams(ip=0.3, values={**zero, "k": 1.0, "tau": 0.02, "c": 0.03, **truth},
+                         effects=(*PHYSICAL_EFFECTS, "rub"))
+    meas = simulate(params, t_end=150.0, dt=0.02, run_up=0.02, noise=5e-4, seed=seed)
+    data = _Data(meas, 0.3, "both", 0.1, None)
+    model = ("unbalance", "viscous_damping")
+    base = compare(data, model, _known(model), simulate=False)
+    scan = _scan_parameters(data, base, "rub", _known(model))
+    found = scan["values"]["rub_clearance"]
+    assert abs(found - 0.05) <= CLEARANCE_TOLERANCE * 0.05, found
+    assert data.scanned == {"rub": {"rub_clearance": found}}
+    assert 2 <= scan["tried"] <= EFFECTS["rub"].parameters[2].scan_points
+    assert 0.0 < scan["active_share"] < 0.9
+    fit = compare(data, (*model, "rub"), _known(model), simulate=False)
+    assert fit.physical["rub_clearance"] == found
+    assert fit.physical["rub_stiffness"] == pytest.approx(0.8, rel=0.05)
+    assert fit.physical["rub_friction"] == pytest.approx(0.15, rel=0.05)

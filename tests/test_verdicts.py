@@ -41,7 +41,7 @@ VERDICTS = {"explained", "explained_after_adding", "partly_explained", "unexplai
 HONEST = {"partly_explained", "unexplained"}
 #: library effects absent from every test rotor (it has unbalance and viscous damping, and
 #: dry friction only where its model says so): adding any of them is a wrong diagnosis
-ABSENT = {"asymmetry", "nonlinear_stiffness", "stiffness", "static_load", "structural_damping"}
+ABSENT = {"asymmetry", "nonlinear_stiffness", "stiffness", "static_load", "structural_damping", "rub"}
 
 #: fault -> (generator, the dominant order it leaves: (|order|, direction); None: both directions)
 GENERATED = {
@@ -53,14 +53,16 @@ GENERATED = {
     "probe runout": (F.probe_runout, (1, "forward")),
     "rub": (F.rub, (1, "forward")),
 }
-#: faults no library effect declares: an honest verdict, nothing added
-FAULTS = {k: GENERATED[k] for k in ("3x forcing", "loose pedestal", "rub")}
+#: faults no library effect declares: an honest verdict, nothing added (the loose pedestal is a
+#: one-directional dead zone: a rub, radial and with friction, must not be named for it)
+FAULTS = {k: GENERATED[k] for k in ("3x forcing", "loose pedestal")}
 #: faults simulated here with their own code (another phase convention than the library's)
 #: that the library now declares: fault -> (library effect, parameter, true value)
 DECLARED = {
     "bow": ("shaft_bow", "bow", 0.015),
     "2x forcing": ("misalignment", "misalignment", 0.008),
     "support anisotropy": ("support_anisotropy", "support_anisotropy", 0.08),
+    "rub": ("rub", "rub_stiffness", 0.5),
 }
 
 
@@ -248,25 +250,31 @@ def test_no_information_is_not_identifiable(case):
 
 
 # ------------------------------------------------------------ coasting down
-@pytest.mark.parametrize("fault", ["rub", "3x forcing"])
+@pytest.mark.parametrize("fault", ["loose pedestal", "3x forcing"])
 def test_undeclared_fault_coasting_down(fault):
     """Faults outside the library on a coast-down from speed 4 (the critical passed
-    decelerating): an honest verdict, nothing added, the fault's order on top."""
+    decelerating): an honest verdict, nothing added, the fault's order on top (the loose
+    pedestal: its order forward and backward, each a large share)."""
     meas = GENERATED[fault][0](3, run_up=F.COAST_DOWN, t_end=F.COAST_DOWN_T_END, dt=0.02)
     d = diagnose(meas, model=F.BASE.model, ip=F.BASE.ip)
     assert d.verdict in HONEST and not set(d.missing) & ABSENT, (d.verdict, d.missing)
-    top = d.unexplained["orders"][0]
+    orders = d.unexplained["orders"]
     order, direction = GENERATED[fault][1]
-    assert (top["order"], top["direction"]) == (order, direction) and top["share"] > 0.5, d.unexplained
+    if direction is None:
+        both = {o["direction"] for o in orders if o["order"] == order and o["share"] > 0.3}
+        assert both == {"forward", "backward"}, orders
+    else:
+        top = orders[0]
+        assert (top["order"], top["direction"]) == (order, direction) and top["share"] > 0.5, orders
 
 
 # ------------------------------------------------------------ faults the library declares now
 @pytest.mark.parametrize("run", ["run-up", "coast-down"])
 @pytest.mark.parametrize("fault", list(DECLARED))
 def test_field_fault_simulated_elsewhere_is_named(fault, run):
-    """The bow, the 2x forcing and the support anisotropy of ``faults.py`` (own column
-    code, another phase convention) are named by the library's effect, its size within
-    5 %, and the residual falls to the noise floor."""
+    """The bow, the 2x forcing, the support anisotropy and the rub of ``faults.py`` (own
+    column code, another phase convention) are named by the library's effect, its size
+    within 5 %, and the residual falls to the noise floor."""
     gen = GENERATED[fault][0]
     meas = gen(4, **F.FAST) if run == "run-up" else gen(4, run_up=F.COAST_DOWN, t_end=F.COAST_DOWN_T_END, dt=0.02)
     d = diagnose(meas, model=F.BASE.model, ip=F.BASE.ip)

@@ -40,6 +40,13 @@ error may move by a few % only, the output error plainly).
 time ``t_c`` (before/after) over a grid and takes the ``t_c`` of least residual
 energy; the effect is reported as appearing at ``t_c`` when the split is
 significant (Bonferroni over the grid) and removes at least 5 % of the energy.
+
+**Scanned parameters.**  An effect whose parameter enters its columns non-linearly
+(the rub's clearance: :attr:`rotor_env.effects.Parameter.scan_points`) is fitted at
+every value of that parameter's grid where it acts on part of the record (not on
+almost all of it: then it is a stiffness change to these data), the value of least
+residual energy is kept and reported (``candidates[*].scan``, and in the parameters),
+and its test pays a Bonferroni factor of the values tried, as the onset scan does.
 """
 
 from .candidates import Candidate

@@ -36,6 +36,8 @@ class Candidate:
     comparison: Comparison = field(repr=False)
     rejected_by: str | None = None   # the rule that rejected it (None: not rejected / not reached)
     checks: dict = field(default_factory=dict)  # the physics checks' numbers
+    #: the scan of its non-linear parameters (the rub's clearance; None: it has none)
+    scan: dict | None = None
 
     def to_dict(self) -> dict:
         return {
@@ -44,7 +46,7 @@ class Candidate:
             "fit_gain": self.fit_gain, "significant": self.significant, "relevant": self.relevant,
             "correlation": self.correlation, "order_overlap": self.order_overlap, "onset": self.onset,
             "declared_orders": list(EFFECTS[self.effect].orders), "story": self.story,
-            "rejected_by": self.rejected_by, "evidence": self.checks,
+            "rejected_by": self.rejected_by, "evidence": self.checks, "scan": self.scan,
         }
 
 
@@ -123,9 +125,88 @@ def _appear_scan(data: _Data, base: Comparison, name: str, known: dict) -> tuple
     return _best_time(np.column_stack([X, y]), t_rows, _grid(data), cols, [])
 
 
+#: points of the fine scan of a scanned parameter between the grid's neighbours of the best value
+FINE_SCAN = 21
+#: a scanned effect (the rub) is tried only at values where it acts on at most this share of
+#: the window's samples: a contact that holds all along is a stiffness change (plus a
+#: cross-coupling) to these data, not a rub that comes and goes ...
+MAX_ACTIVE_SHARE = 0.9
+#: ... and on at least this many samples (fewer cannot be told from noise)
+MIN_ACTIVE_SAMPLES = 50
+
+
+def _active(Z: np.ndarray, per: int) -> np.ndarray:
+    """Per sample: does the effect act (any of its columns non-zero)?"""
+    nz = np.any(Z != 0.0, axis=1)
+    return nz.reshape(-1, per).any(axis=1)
+
+
+def _scan_parameters(data: _Data, base: Comparison, name: str, known: dict) -> dict | None:
+    """Scan ``name``'s non-linear parameters (the rub's clearance) over their grids.
+
+    Every grid value (geometric over the parameter's plausible bounds, :meth:`Parameter.scan_grid`)
+    where the effect acts on some but not all of the window (:data:`MAX_ACTIVE_SHARE`,
+    :data:`MIN_ACTIVE_SAMPLES`) is fitted in the model ``base + name`` (equation error); the
+    least energy wins, then a fine scan between its neighbours.  The value is set in
+    ``data.scanned`` (every later fit of the effect uses it); the caller pays a Bonferroni
+    factor of the number of values tried, as for the onset.  None: the effect has no
+    scanned parameter; ``{"values": {}}``: no value where it comes and goes.
+    """
+    eff = EFFECTS[name]
+    params = eff.scanned_parameters
+    if not params:
+        return None
+    if len(params) > 1:  # pragma: no cover - no library effect scans two (a product grid would)
+        raise NotImplementedError(f"{name}: one scanned parameter per effect is supported")
+    p = params[0]
+    per = 2 if data.equation == "both" else 1
+    # the base model's columns once (the same rows as the design of base + name); the
+    # effect's own columns at each value
+    _, Xb, y, _, _, _ = _design(data, base.model, known, base.onsets, base.splits)
+    Xb = Xb[:, np.linalg.norm(Xb, axis=0) > 0]
+
+    def energy(v: float) -> tuple[float, float]:
+        data.scanned[name] = {p.name: float(v)}
+        Z = _candidate_columns(data, name, None)
+        share = float(_active(Z, per).mean())
+        n_on = share * len(y) / per
+        if share > MAX_ACTIVE_SHARE or n_on < MIN_ACTIVE_SAMPLES:
+            return math.inf, share
+        X = np.hstack([Xb, Z])
+        theta, *_ = np.linalg.lstsq(X, y, rcond=None)
+        r = y - X @ theta
+        return float(r @ r), share
+
+    grid = p.scan_grid()
+    J = np.empty(len(grid))
+    shares = np.empty(len(grid))
+    for i, v in enumerate(grid):
+        J[i], shares[i] = energy(v)
+    tried = int(np.isfinite(J).sum())
+    out = {"parameter": p.name, "grid": [float(grid[0]), float(grid[-1]), len(grid)], "tried": tried,
+           "active_share_limits": [MIN_ACTIVE_SAMPLES, MAX_ACTIVE_SHARE]}
+    if tried == 0:
+        data.scanned.pop(name, None)
+        out["values"] = {}
+        return out
+    k = int(np.argmin(J))
+    best, J_best, share_best = float(grid[k]), float(J[k]), float(shares[k])
+    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+    for v in np.linspace(lo, hi, FINE_SCAN):
+        Jv, sv = energy(v)
+        if Jv < J_best:
+            best, J_best, share_best = float(v), Jv, sv
+    data.scanned[name] = {p.name: best}
+    out.update({"values": {p.name: best}, "energy": J_best, "active_share": share_best,
+                # the scan's energy profile (grid value, energy relative to the best; inf: not tried)
+                "profile": [[float(v), float(j / J_best) if J_best > 0 and math.isfinite(j) else None]
+                            for v, j in zip(grid, J, strict=True)]})
+    return out
+
+
 def _candidate_columns(data: _Data, name: str, onset: float | None) -> np.ndarray:
     """The candidate's regressor columns on the window's rows (zero before an onset)."""
-    spec = RegressionSpec(effects=(name,), equation=data.equation, known={})
+    spec = RegressionSpec(effects=(name,), equation=data.equation, known={}, scanned=data.scanned)
     Z, _ = regression_arrays(spec, data.data, data.ip)
     if onset is not None:
         Z[np.repeat(data.meas.t, spec.rows_per_sample) < onset] = 0.0
@@ -160,9 +241,16 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
     for name in candidates:
         kn = {k: v for k, v in known.items() if k != name}
         null = EFFECTS[name].to_coefficients(known[name]) if name in known else None
+        # a non-linear parameter (the rub's clearance) is scanned first, and the scan paid for
+        scan = _scan_parameters(data, base, name, kn)
+        if scan is not None and not scan["values"]:
+            out.append(_not_scanned(name, base, scan))
+            continue
         comp = compare(data, (*base.model, name), kn, base.onsets, base.splits)
         q = comp.n_params - base.n_params
         F, lp = _wald(data, comp, name, kn, null) if q > 0 else (0.0, 0.0)
+        if scan is not None:
+            lp = min(0.0, lp + math.log10(max(scan["tried"], 1)))
         onset = None
         # the same effect appearing mid-run (a crack): scan its onset, pay for the scan
         if q > 0:
@@ -198,10 +286,23 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
             # residual with the wrong physics (e.g. quadratic stiffness for a side load)
             relevant=bool(gain >= min_fit_gain or (drop >= min_energy_drop and gain > -min_fit_gain)),
             correlation=float(corr), order_overlap=overlap, onset=onset,
-            story=f"{eff.cause}. Signature: {eff.signature}.", comparison=comp,
+            story=f"{eff.cause}. Signature: {eff.signature}.", comparison=comp, scan=scan,
         ))
     out.sort(key=lambda c: (c.log10_p, -c.F))
     return out
+
+
+def _not_scanned(name: str, base: Comparison, scan: dict) -> Candidate:
+    """A scanned effect with no value where it comes and goes: not a candidate this round."""
+    eff = EFFECTS[name]
+    return Candidate(
+        effect=name, F=0.0, log10_p=0.0, rms_after=base.rms, fit_percent_after=base.fit_percent,
+        energy_drop=0.0, fit_gain=0.0, significant=False, relevant=False, correlation=0.0, order_overlap=0.0,
+        onset=None, story=f"{eff.cause}. Signature: {eff.signature}.", comparison=base, scan=scan,
+        rejected_by=(f"no {scan['parameter']} in [{scan['grid'][0]:g}, {scan['grid'][1]:g}] where it comes and "
+                     f"goes: at every value it acts on fewer than {MIN_ACTIVE_SAMPLES} samples or on more than "
+                     f"{100 * MAX_ACTIVE_SHARE:.0f} % of the record"),
+    )
 
 
 def _appears_or_changes(data: _Data, comp: Comparison, effect: str, alpha: float,

@@ -251,6 +251,8 @@ def check_candidate(data: _Data, base: Comparison, cand, floor: float,
     ``library``: the other candidates of the round (the onset check refits with them).
     """
     evidence: dict = {}
+    if getattr(cand, "scan", None) is not None:
+        evidence["scan"] = cand.scan  # the non-linear parameter's scan (the rub's clearance)
     known = _known(base.model)
     null = (np.asarray(EFFECTS[cand.effect].to_coefficients(known[cand.effect]), dtype=float)
             if cand.effect in known else None)

@@ -179,6 +179,9 @@ class _Data:
         self.equation = equation
         self.data = np.ascontiguousarray(self.meas.data)
         self.raw_data = np.ascontiguousarray(self.raw.data)
+        #: the scanned parameters' values the models are built with (effect -> {name: value}):
+        #: set by the candidate scan (:func:`.candidates._scan_parameters`), defaults elsewhere
+        self.scanned: dict[str, dict[str, float]] = {}
 
 
 def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, float],
@@ -189,7 +192,8 @@ def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, fl
     ``splits`` it has its own coefficients before the onset (its value *changes*, a
     crack that grows), in extra columns named ``<coefficient>_before``.
     """
-    spec = RegressionSpec(effects=tuple(model), equation=data.equation, known=known or {})
+    spec = RegressionSpec(effects=tuple(model), equation=data.equation, known=known or {},
+                          scanned=getattr(data, "scanned", {}))
     X, y = regression_arrays(spec, data.raw_data if raw else data.data, data.ip)
     t_rows = np.repeat(data.meas.t, spec.rows_per_sample)
     columns, groups, extra = list(spec.columns), dict(spec.groups), []

@@ -26,6 +26,7 @@ LIBRARY_CANDIDATES: tuple[str, ...] = (
     "cross_coupled_stiffness",
     "misalignment",
     "breathing_crack",
+    "rub",
 )
 
 

@@ -629,6 +629,16 @@ class DiagnosisFigures:
                              "by speed band:</p>"
                              "<table class='lookalike-speed'><tr><th>speed band</th><th>amplitude</th></tr>"
                              f"{rows}</table>")
+            where = ev.get("acts_where") or {}
+            if where.get("reading"):
+                scanned = ", ".join(f"{k} = {_num(v, '.4g')}" for k, v in (where.get("scanned") or {}).items())
+                first, last = where.get("first_contact") or {}, where.get("last_contact") or {}
+                parts.append(
+                    f"<p class='acts-where'>Scanned: {_e(scanned)}. {_e(where['reading'])}. Where it acts the "
+                    f"residual held {_pct(where.get('backward_1x_share'), '.0f')} backward 1x and "
+                    f"{_pct(where.get('half_order_share'), '.0f')} at 1/2x; contact from speed "
+                    f"{_num(first.get('speed'), '.3g')} to {_num(last.get('speed'), '.3g')} in this "
+                    f"{_e(where.get('sweep', ''))}.</p>")
             rows = "".join(
                 f"<tr><td>{_e(lk.get('effect', ''))}</td><td>{_e(lk.get('status', ''))}</td>"
                 f"<td>{_num(lk.get('log10_p'), '.4g')}</td>"

@@ -199,6 +199,13 @@ class Diagnosis(DiagnosisFigures):
             if ev["residual_by_speed"]:
                 lines.append(f"    its {ev['residual_by_speed'][0]['order']}x line by speed: " + ", ".join(
                     f"{b['speed_min']:.2g}-{b['speed_max']:.2g}: {b['amplitude']:.2g}" for b in ev["residual_by_speed"]))
+            where = ev.get("acts_where")
+            if where and where.get("reading"):
+                scanned = ", ".join(f"{k} = {v:.4g}" for k, v in where["scanned"].items())
+                lines.append(f"    {scanned} (scanned): {where['reading']}")
+                lines.append(f"    where it acts the residual held -1x {100 * where['backward_1x_share']:.0f} %, "
+                             f"1/2x {100 * where['half_order_share']:.0f} %; first contact at speed "
+                             f"{where['first_contact']['speed']:.3g}, last at {where['last_contact']['speed']:.3g}")
             for lk in ev["lookalikes"]:
                 lines.append(f"    - {lk['effect']}: {lk['status']}")
         if self.rejected:

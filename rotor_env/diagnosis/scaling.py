@@ -26,6 +26,7 @@ import numpy as np
 
 from identifier.hac import hac_covariance
 
+from ..effects import EFFECTS
 from ..measurements import Measurements
 from ..regression import RegressionSpec, regression_arrays
 from .compare import _white_level
@@ -92,7 +93,10 @@ def _widest(model: Sequence[str], candidates: Sequence[str] = ()) -> tuple[str, 
     read with all of them free, so that a missing one cannot bias it), the stiffness last."""
     from .model import LIBRARY_CANDIDATES
 
-    effects = [e for e in (*model, *LIBRARY_CANDIDATES, *candidates) if e != "stiffness"]
+    # an effect with a scanned parameter (the rub's clearance) has no columns before its
+    # scan: it is left out (at a guessed clearance it would fit something else)
+    effects = [e for e in (*model, *LIBRARY_CANDIDATES, *candidates)
+               if e != "stiffness" and (e in model or not EFFECTS[e].scanned_parameters)]
     if "unbalance_in_phase" in effects:  # shares tau with the unbalance
         effects = [e for e in effects if e != "unbalance"]
     return (*dict.fromkeys(effects), "stiffness")

@@ -139,10 +139,13 @@ def lookalike_evidence(data: _Data, base: Comparison, ranked: list, chosen) -> d
             c = by_name[name]
             status = c.rejected_by or (f"ranked below {chosen.effect} (log10 p {c.log10_p:.3g} vs "
                                        f"{chosen.log10_p:.3g})")
-            rows.append({"effect": name, "log10_p": c.log10_p, "energy_drop": c.energy_drop,
-                         "fit_gain": c.fit_gain, "declared_orders": list(EFFECTS[name].orders), "status": status})
+            row = {"effect": name, "log10_p": c.log10_p, "energy_drop": c.energy_drop,
+                   "fit_gain": c.fit_gain, "declared_orders": list(EFFECTS[name].orders), "status": status}
+            if getattr(c, "scan", None):
+                row["scan"] = {k: c.scan.get(k) for k in ("values", "active_share", "tried")}
+            rows.append(row)
     main = eff.orders[0] if eff.orders else None
-    return {
+    out = {
         "effect": chosen.effect,
         "declared_orders": list(eff.orders),
         "log10_p": chosen.log10_p, "energy_drop": chosen.energy_drop, "fit_gain": chosen.fit_gain,
@@ -150,3 +153,94 @@ def lookalike_evidence(data: _Data, base: Comparison, ranked: list, chosen) -> d
         "residual_by_speed": order_by_speed(data, base.residual, main) if main is not None else [],
         "lookalikes": rows,
     }
+    if getattr(chosen, "scan", None) and chosen.scan.get("values"):
+        out["acts_where"] = acts_where(data, base, chosen)
+    return out
+
+
+def acts_where(data: _Data, base: Comparison, cand) -> dict:
+    """Where an effect with a scanned threshold (the rub's clearance) acts, and what the
+    misfit it removes looked like there and elsewhere — the evidence against a stiffness
+    change (acts at every amplitude) and a quadratic stiffness (grows smoothly with it).
+
+    Per sample of the window: does the effect act (its columns non-zero at the scanned
+    value)?  Reported: the scanned value, the smallest and largest inclination where it
+    acts (its amplitude threshold), the first and last time and speed of contact in the
+    sweep (run-up or coast-down: a rub's contact band differs between them), the base
+    model's residual RMS over the noise floor where it acts and elsewhere, the residual's
+    order lines where it acts (the backward -1x and the 1/2x sub-harmonic among them),
+    and how sharply the scan's energy rises away from the value found.
+    """
+    from ..regression import RegressionSpec, regression_arrays
+
+    name = cand.effect
+    m = data.meas
+    spec = RegressionSpec(effects=(name,), equation=data.equation, known={}, scanned=data.scanned)
+    Z, _ = regression_arrays(spec, data.data, data.ip)
+    k = spec.rows_per_sample
+    on = np.any(Z != 0.0, axis=1).reshape(-1, k).any(axis=1)
+    amp = np.hypot(m.theta_x, m.theta_y)
+    floor = estimate_noise_floor(data, base)
+    r = base.residual
+    per_sample = np.sqrt(sum(r[j::k] ** 2 for j in range(k)) / k)
+
+    def over(sel) -> float | None:
+        return float(np.sqrt(np.mean(per_sample[sel] ** 2)) / floor) if sel.any() and floor > 0 else None
+
+    _, Xb, yb, _, _, _ = _design(data, base.model, _known(base.model), base.onsets, base.splits)
+
+    def refit(sel) -> float | None:
+        """The starting model refitted to these samples alone: its RMS over the floor."""
+        rows = np.repeat(sel, k)
+        X, y = Xb[rows], yb[rows]
+        X = X[:, np.linalg.norm(X, axis=0) > 0]
+        if sel.sum() < 50 * max(1, X.shape[1]) or floor <= 0:
+            return None
+        theta, *_ = np.linalg.lstsq(X, y, rcond=None)
+        e = y - X @ theta
+        return float(np.sqrt(np.mean(e * e)) / floor)
+
+    masked = r.copy()
+    masked.reshape(-1, k)[~on] = 0.0
+    lines = order_lines(data, masked)
+    share = {}
+    for o in lines:
+        signed = -o["order"] if o["direction"] == "backward" else o["order"]
+        share[float(signed)] = share.get(float(signed), 0.0) + o["share"]
+    scan = cand.scan or {}
+    prof = [(v, j) for v, j in scan.get("profile", []) if j is not None]
+    value = next(iter(scan.get("values", {}).values()), None)
+    contrast = {}
+    if prof and value:
+        for label, f in (("at_half", 0.5), ("at_double", 2.0)):
+            v, j = min(prof, key=lambda pj, f=f: abs(math.log(pj[0] / (f * value))))
+            if abs(math.log(v / (f * value))) < 0.15:
+                contrast[label] = j
+    sweep = "run-up" if m.phi_dot[-1] >= m.phi_dot[0] else "coast-down"
+    idx = np.flatnonzero(on)
+    out = {
+        "scanned": dict(scan.get("values", {})),
+        "active_share": float(on.mean()),
+        "acts_above_amplitude": float(amp[on].min()) if on.any() else None,
+        "peak_amplitude": float(amp.max()),
+        "sweep": sweep,
+        "first_contact": {"t": float(m.t[idx[0]]), "speed": float(m.phi_dot[idx[0]])} if idx.size else None,
+        "last_contact": {"t": float(m.t[idx[-1]]), "speed": float(m.phi_dot[idx[-1]])} if idx.size else None,
+        "residual_over_floor": {"where_it_acts": over(on), "elsewhere": over(~on)},
+        # the starting model refitted to each part alone (the misfit of one part cannot pull it)
+        "starting_model_refitted_over_floor": {"where_it_acts": refit(on), "elsewhere": refit(~on)},
+        "residual_orders_where_it_acts": lines[:4],
+        "backward_1x_share": share.get(-1.0, 0.0),
+        "half_order_share": share.get(0.5, 0.0) + share.get(-0.5, 0.0),
+        # the scan's energy at half and at twice the value found, over its least energy
+        "scan_energy_ratio": contrast,
+    }
+    refitted = out["starting_model_refitted_over_floor"]
+    ins, outs = refitted["where_it_acts"], refitted["elsewhere"]
+    if ins is not None and outs is not None:
+        out["reading"] = (
+            f"refitted to the samples where |theta| exceeds {out['acts_above_amplitude']:.3g} "
+            f"({100 * out['active_share']:.0f} % of the {sweep}) the starting model leaves {ins:.1f}x the noise "
+            f"floor, refitted to the others {outs:.1f}x: the misfit sits above a threshold amplitude, where a "
+            "stiffness change would act at every amplitude and a quadratic stiffness grow smoothly with it")
+    return out

@@ -227,6 +227,8 @@ def _choose(data, base: Comparison, ranked: list[Candidate], floor: float, alpha
     """The best candidate that is significant, relevant and passes the physics checks."""
     n = max(1, len(ranked))
     for c in ranked:
+        if c.rejected_by is not None:  # turned down while ranked (a scan that found no value)
+            continue
         if not c.significant:
             c.rejected_by = (f"not significant: HAC Wald test log10 p = {c.log10_p:.3g} "
                              f"(needs < {math.log10(alpha / n):.3g})")
