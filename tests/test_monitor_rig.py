@@ -185,6 +185,35 @@ def test_healthy_si_streams_raise_no_alarm(healthy_runs):
         assert abs(coef["asymmetry"]["D"]) < 2e-3
 
 
+def test_live_view_and_report_show_seconds_and_rpm(healthy_runs, tmp_path):
+    import io
+
+    from rich.console import Console
+
+    from rotor_env.monitor.live import LiveView
+    from rotor_env.monitor.report import write_report
+
+    rig, _, paths = healthy_runs
+    stream = RigStream(paths[0], rig, NATURAL_RPM)
+    mon = Monitor(ip=rig.ip, status_every=1.0 * W_REF)
+    statuses = []
+    for chunk in stream:
+        statuses += [stream.clock.annotate(e) for e in mon.update(chunk) if e["event"] == "status"]
+    last = statuses[-1]
+    # the sweep's truth: 300 + 400 t rpm
+    assert last["rpm"] == pytest.approx(300.0 + 400.0 * last["t_s"], rel=0.01)
+    view = LiveView(str(paths[0]))
+    view.monitor = mon
+    view.show(last)
+    buf = io.StringIO()
+    Console(file=buf, width=200).print(view._render())
+    assert f"t = {last['t_s']:.3f} s, {last['rpm']:.0f} rpm" in buf.getvalue()
+    write_report(mon, tmp_path / "r.html", source=str(paths[0]), clock=stream.clock)
+    text = (tmp_path / "r.html").read_text()
+    end = mon.summary()
+    assert f"{stream.clock.seconds(end['t']):.3f} s ({stream.clock.rpm(end['speed']):.0f} rpm" in text
+
+
 # ----------------------------------------------------------------- (d) errors
 def _lines(path):
     return path.read_text().splitlines(keepends=True)
