@@ -27,6 +27,7 @@ import numpy as np
 
 from ..measurements.vectors import fit_orders, keyphasor_times, order_track
 from .orders import order_map
+from .synchronous import SynchronousModel, whirl_branches
 
 __all__ = [
     "ParameterTracks",
@@ -419,6 +420,10 @@ def plot_waterfall(
 
 
 # ------------------------------------------------------------------ Campbell
+#: the fixed-frame effects of :func:`whirl_frequencies` (after the implicit stiffness)
+_WHIRL_EFFECTS = ("viscous_damping", "support_anisotropy", "cross_coupled_stiffness")
+
+
 def whirl_frequencies(
     speed: np.ndarray,
     stiffness: float,
@@ -436,15 +441,17 @@ def whirl_frequencies(
 
     i.e. ``z'' - i ip phid z' + c z' + k z + delta conj(z) - i q z = 0`` with ``stiffness``
     ``k``, ``damping`` ``c``, ``anisotropy`` ``delta`` (the ``support_anisotropy``
-    coefficient: ``k_y = k + delta``, ``k_x = k - delta``) and ``cross_coupling`` ``q``
-    (``cross_coupled_stiffness``).  The eigenvalues ``lambda = -sigma +- i w`` of its 4x4
-    real state matrix give the damped frequencies ``w``; each mode's eigenvector
-    ``(v_y, v_x)`` whirls forward when its forward part ``|v_y + i v_x|`` exceeds its
-    backward part ``|v_y - i v_x|`` (a straight-line mode has both equal).  Returns
-    ``{"forward": w_f, "backward": w_b}``, signed (``w_b < 0`` for a backward whirl; rad
-    per time unit of the inputs), NaN where a mode is over-critically damped.  Where both
-    modes whirl the same way (strong anisotropy), the higher one is the ``forward``
-    branch, each keeping the sign of its own whirl.
+    coefficient: ``k_y = k + delta``, ``k_x = k - delta``), ``cross_coupling`` ``q``
+    (``cross_coupled_stiffness``) and ``ip`` in [0, 1).  The eigen-analysis is the
+    synchronous model's (:func:`rotor_env.diagnosis.synchronous.whirl_branches`, on these
+    effects): the eigenvalues ``lambda = -sigma +- i w`` of its 4x4 real state matrix give
+    the damped frequencies ``w``; each mode's eigenvector ``(v_y, v_x)`` whirls forward when
+    its forward part ``|v_y + i v_x|`` exceeds its backward part ``|v_y - i v_x|`` (a
+    straight-line mode has both equal).  Returns ``{"forward": w_f, "backward": w_b}``,
+    signed (``w_b < 0`` for a backward whirl; rad per time unit of the inputs), NaN where a
+    mode is over-critically damped.  Where both modes whirl the same way (strong
+    anisotropy), the higher one is the ``forward`` branch, each keeping the sign of its own
+    whirl.
 
     Covered: isotropic and anisotropic supports, gyroscopic stiffening/softening,
     viscous damping and cross-coupled stiffness (all fixed-frame, linear, constant
@@ -452,31 +459,10 @@ def whirl_frequencies(
     periodic coefficients, which need Floquet analysis), non-linear stiffness and dry
     friction.
     """
-    speed = np.atleast_1d(np.asarray(speed, dtype=float))
-    k, c, d, q = float(stiffness), float(damping), float(anisotropy), float(cross_coupling)
-    K = np.array([[k + d, q], [-q, k - d]])
-    fwd, bwd = np.full(speed.shape, np.nan), np.full(speed.shape, np.nan)
-    for j, w in enumerate(speed):
-        CG = c * np.eye(2) + ip * w * np.array([[0.0, 1.0], [-1.0, 0.0]])
-        A = np.block([[np.zeros((2, 2)), np.eye(2)], [-K, -CG]])
-        lam, vec = np.linalg.eig(A)
-        modes = []
-        upper = np.flatnonzero(lam.imag > 1e-12 * max(1.0, float(np.max(np.abs(lam)))))
-        if len(upper) == 2 and abs(lam[upper[0]] - lam[upper[1]]) <= 1e-9 * abs(lam[upper[0]]):
-            # a double eigenvalue (isotropic rotor at rest): its eigenvectors are any mix of
-            # the forward and the backward circle, which both belong to it
-            modes = [lam[upper[0]].imag, -lam[upper[0]].imag]
-        else:
-            for i in upper:
-                vy, vx = vec[0, i], vec[1, i]  # th_y = Re(v_y e^{lambda t}), th_x = Re(v_x e^{lambda t})
-                f, b = abs(vy + 1j * vx), abs(vy - 1j * vx)
-                modes.append(lam[i].imag if f >= b else -lam[i].imag)
-        modes.sort(reverse=True)
-        if len(modes) == 2:
-            fwd[j], bwd[j] = modes
-        elif len(modes) == 1:  # one mode over-critically damped
-            (fwd if modes[0] > 0 else bwd)[j] = modes[0]
-    return {"forward": fwd, "backward": bwd}
+    model = SynchronousModel(_WHIRL_EFFECTS, ip=float(ip))
+    values = (stiffness, damping, anisotropy, cross_coupling)
+    coef = model.coef_vector({e: np.array([float(v)]) for e, v in zip(model.layout, values, strict=True)})
+    return whirl_branches(model, coef, speed)
 
 
 def whirl_peaks(

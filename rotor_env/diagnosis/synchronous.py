@@ -40,6 +40,8 @@ The eigenvalues ``lambda`` of the linearised model at speed ``W``; a critical is
 where a branch's whirl frequency ``|Im lambda|`` equals ``W`` (the 1x line crosses the
 Campbell diagram) on a mode that whirls forward at least in part (an isotropic rotor's
 backward mode is not excited by unbalance); its damping ratio is ``-Re lambda / |lambda|``.
+The same eigenvalues, each signed by its whirl, are the branches of the Campbell diagram
+(:func:`whirl_branches`).
 """
 
 from __future__ import annotations
@@ -64,6 +66,7 @@ __all__ = [
     "VectorFit",
     "critical_speeds",
     "fit_vectors",
+    "whirl_branches",
 ]
 
 #: the measurement term "probe runout": a constant 1X vector per probe
@@ -641,17 +644,48 @@ def _finish(prob: _Problem, x: np.ndarray, success: bool) -> VectorFit:
 
 
 # ----------------------------------------------------------------- criticals
-def _modes(model: SynchronousModel, coef: np.ndarray, W: float) -> tuple[np.ndarray, np.ndarray]:
-    """Eigenvalues with positive imaginary part and each one's forward share."""
+def _eigen(model: SynchronousModel, coef: np.ndarray, W: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eigenvalues of the linearised state matrix at ``W`` and each eigenvector's forward
+    and backward parts ``|v_u + i v_v|``, ``|v_u - i v_v|``."""
     A_q, A_w = model.linearised(coef, W)
     A = np.block([[np.zeros((2, 2)), np.eye(2)], [A_q, A_w]])
     lam, vec = np.linalg.eig(A)
+    return lam, np.abs(vec[0] + 1j * vec[1]), np.abs(vec[0] - 1j * vec[1])
+
+
+def _modes(model: SynchronousModel, coef: np.ndarray, W: float) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues with positive imaginary part and each one's forward share."""
+    lam, fwd, bwd = _eigen(model, coef, W)
     keep = lam.imag > 1e-9
-    lam, vec = lam[keep], vec[:, keep]
-    fwd = np.abs(vec[0] + 1j * vec[1])
-    bwd = np.abs(vec[0] - 1j * vec[1])
+    lam, fwd, bwd = lam[keep], fwd[keep], bwd[keep]
     order = np.argsort(lam.imag)
     return lam[order], (fwd / np.maximum(fwd + bwd, 1e-300))[order]
+
+
+def whirl_branches(model: SynchronousModel, coef: np.ndarray, speed: np.ndarray) -> dict[str, np.ndarray]:
+    """The Campbell diagram's branches: the damped whirl frequencies ``Im lambda`` of the
+    linearised model at each dimensionless ``speed``, signed by the whirl of each mode
+    (forward where its forward part is at least its backward part; a double eigenvalue,
+    the isotropic rotor at rest, is both circles).  ``{"forward": w_f, "backward": w_b}``
+    (``w_b < 0`` for a backward whirl), NaN where a mode is over-critically damped;
+    where both modes whirl the same way (strong anisotropy), the higher one is the
+    ``forward`` branch, each keeping the sign of its own whirl."""
+    speed = np.atleast_1d(np.asarray(speed, dtype=float))
+    fwd, bwd = np.full(speed.shape, np.nan), np.full(speed.shape, np.nan)
+    for j, w in enumerate(speed):
+        lam, f, b = _eigen(model, coef, w)
+        upper = np.flatnonzero(lam.imag > 1e-12 * max(1.0, float(np.max(np.abs(lam)))))
+        if len(upper) == 2 and abs(lam[upper[0]] - lam[upper[1]]) <= 1e-9 * abs(lam[upper[0]]):
+            # its eigenvectors are any mix of the forward and the backward circle
+            modes = [lam[upper[0]].imag, -lam[upper[0]].imag]
+        else:
+            modes = [lam[i].imag if f[i] >= b[i] else -lam[i].imag for i in upper]
+        modes.sort(reverse=True)
+        if len(modes) == 2:
+            fwd[j], bwd[j] = modes
+        elif len(modes) == 1:  # one mode over-critically damped
+            (fwd if modes[0] > 0 else bwd)[j] = modes[0]
+    return {"forward": fwd, "backward": bwd}
 
 
 def critical_speeds(model: SynchronousModel, coef: np.ndarray, w_ref: float, speed: np.ndarray,
