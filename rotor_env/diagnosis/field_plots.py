@@ -172,6 +172,15 @@ def _curves(measured: Mapping[str, np.ndarray], models: Mapping[str, Mapping[str
     return out
 
 
+def _vector_plot(ax, n: int, speed: np.ndarray, measured: Mapping[str, np.ndarray],
+                 models: Mapping[str, Mapping[str, np.ndarray]] | None, **axes_kw):
+    """The opening of the vector plots (Bode, polar): ``(figure, [axes], speed, curves)``,
+    the caller's ``n`` axes or a new figure (``axes_kw``: its size, shared axes), the speeds
+    as floats and every curve of :func:`_curves`."""
+    fig, axes = _axes(ax, n, **axes_kw)
+    return fig, axes, np.asarray(speed, dtype=float), _curves(measured, models)
+
+
 def plot_bode(
     speed: np.ndarray,
     measured: Mapping[str, np.ndarray],
@@ -190,9 +199,8 @@ def plot_bode(
     same speeds.  ``phase`` is ``lag`` (instrument, ``x = A cos(phi - lag)``, 0..360 deg
     unwrapped through the run) or ``lead`` (``angle(X)``).  ``ax``: a pair of axes.
     """
-    fig, (a_amp, a_ph) = _axes(ax, 2, figsize=(8, 5.5), sharex=True)
-    speed = np.asarray(speed, dtype=float)
-    for label, ch, style, X in _curves(measured, models):
+    fig, (a_amp, a_ph), speed, curves = _vector_plot(ax, 2, speed, measured, models, figsize=(8, 5.5), sharex=True)
+    for label, ch, style, X in curves:
         colour = f"C{ch}"
         a_amp.plot(speed, np.abs(X), color=colour, label=label, **style)
         a_ph.plot(speed, phase_deg(X, phase), color=colour, **style)
@@ -231,10 +239,9 @@ def plot_polar(
     clockwise (phase lag grows against the rotation, as instruments draw it).  Speeds are
     written at ``n_labels`` points of each measured curve.
     """
-    fig, (ax,) = _axes(ax, 1, figsize=(6, 6))
-    speed = np.asarray(speed, dtype=float)
+    fig, (ax,), speed, curves = _vector_plot(ax, 1, speed, measured, models, figsize=(6, 6))
     r_max = 0.0
-    for label, ch, style, X in _curves(measured, models):
+    for label, ch, style, X in curves:
         ok = np.isfinite(X)
         ax.plot(X.real[ok], X.imag[ok], color=f"C{ch}", label=label, **style)
         r_max = max(r_max, float(np.nanmax(np.abs(X))) if ok.any() else 0.0)
