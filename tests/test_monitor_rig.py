@@ -280,6 +280,7 @@ def test_missing_keyphasor_pulse_is_the_batch_paths_error(healthy_runs, tmp_path
             rows += len(chunk)
     assert "missing pulse" in str(streamed.value) and f"{path}, column 'kp', line" in str(streamed.value)
     assert str(streamed.value) == str(batch.value)  # the same check, the same pulse, line and time
+    assert f", line {stream.error_line}: irregular pulses" in str(streamed.value)
     assert rows > 0  # the revolutions before it went to the monitor
 
 

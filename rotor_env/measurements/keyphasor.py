@@ -37,7 +37,9 @@ PERIOD_RATIO = (0.6, 1.6)
 
 
 class KeyphasorError(ValueError):
-    """Keyphasor pulses that cannot give the spin angle."""
+    """Keyphasor pulses that cannot give the spin angle (``line``: the file line, where known)."""
+
+    line: int | None = None
 
 
 def period_ratio(edges: np.ndarray, i: int) -> float | None:
@@ -77,11 +79,13 @@ def check_periods(edges: np.ndarray, revolutions, threshold: float, *, where: st
         line = f", line {line_of(i)}" if line_of is not None else ""
         period = edges[i + 1] - edges[i]
         n = first_pulse + i
-        raise KeyphasorError(
+        exc = KeyphasorError(
             f"{where}{line}: irregular pulses at t = {edges[i]:.6g}: a revolution of {period:.4g} between "
             f"pulses {n + 1} and {n + 2}, {ratio:.2f}x its neighbours ({kind}); check the threshold "
             f"(now {threshold:g}) or the keyphasor signal"
         )
+        exc.line = line_of(i) if line_of is not None else None
+        raise exc
 
 
 def pulse_edges(t: np.ndarray, signal: np.ndarray, threshold: float | None = None, *, where: str = "keyphasor",
@@ -229,9 +233,10 @@ class KeyphasorTracker:
             return False
         thr = 0.5 * (lo + hi) if self.threshold is None else float(self.threshold)
         if not lo < thr < hi:
-            if final or self.threshold is not None:
-                raise KeyphasorError(f"{self.where}: threshold {thr:g} is outside the signal's range [{lo:g}, {hi:g}] "
-                                     "of its first samples")
+            # a given threshold outside the levels seen so far: no pulse yet (a slow start)
+            if final:
+                raise KeyphasorError(f"{self.where}: threshold {thr:g} is outside the signal's range "
+                                     f"[{lo:g}, {hi:g}]")
             return False
         high = x > thr
         pulse_high = bool(high.mean() < 0.5)
@@ -272,8 +277,10 @@ class KeyphasorTracker:
             if short.any():
                 j = int(np.argmax(short))
                 m = j + 1 - len(before)  # the new edge ending the short revolution
-                raise KeyphasorError(f"{self.where}, line {ll[k[m] + 1]}: only {periods[j] / self._dt:.1f} samples "
+                exc = KeyphasorError(f"{self.where}, line {ll[k[m] + 1]}: only {periods[j] / self._dt:.1f} samples "
                                      f"per revolution at t = {new[m]:.6g}: sample faster")
+                exc.line = int(ll[k[m] + 1])
+                raise exc
         self._edges = np.concatenate([self._edges, new])
         self._edge_lines = np.concatenate([self._edge_lines, ll[k + 1]])
         self._n_edges += len(new)

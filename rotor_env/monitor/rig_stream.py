@@ -412,12 +412,9 @@ class RigStream:
             raise self._fail(self._keyphasor_line(exc), str(exc)) from None
         return self._downstream(released, final=False)
 
-    @staticmethod
-    def _keyphasor_line(exc: Exception) -> int:
-        import re
-
-        m = re.search(r", line (\d+)", str(exc))
-        return int(m.group(1)) if m else -1
+    def _keyphasor_line(self, exc: KeyphasorError) -> int:
+        """The file line an irregular pulse was found at (else the last line read)."""
+        return exc.line if exc.line is not None else self.line + 1
 
     def _downstream(self, released, *, final: bool) -> np.ndarray:
         t, phi, speed, accel, x, lines = released
