@@ -137,7 +137,8 @@ def load_rig(path: str | os.PathLike) -> Rig:
     return _build(raw, str(path))
 
 
-def _num(where: str, key: str, value, *, positive: bool = False, allow_none: bool = False) -> float | None:
+def _number(where: str, key: str, value, *, allow_none: bool = False, positive: bool = False) -> float | None:
+    """A finite number (``positive``: above zero); ``None`` passes with ``allow_none``."""
     if value is None and allow_none:
         return None
     try:
@@ -149,9 +150,35 @@ def _num(where: str, key: str, value, *, positive: bool = False, allow_none: boo
     return v
 
 
+def _positive(where: str, key: str, value, *, allow_none: bool = False) -> float | None:
+    """A positive number; ``None`` passes with ``allow_none``."""
+    return _number(where, key, value, allow_none=allow_none, positive=True)
+
+
+def _in_range(where: str, key: str, value, lo: float, hi: float, says: str, *, below_hi: bool = False) -> float:
+    """A finite number in ``[lo, hi]`` (``below_hi``: ``[lo, hi)``); ``says`` (``{v}``: the
+    number) tells what is wrong with one outside."""
+    v = _number(where, key, value)
+    if not (lo <= v < hi if below_hi else lo <= v <= hi):
+        raise RigError(f"{where}: key {key!r}: " + says.format(v=v))
+    return v
+
+
 def _choice(where: str, key: str, value, options) -> str:
+    """One of ``options`` (names)."""
     if value not in options:
         raise RigError(f"{where}: key {key!r}: {value!r} is not one of {', '.join(map(str, options))}")
+    return value
+
+
+def _section(where: str, raw: dict, key: str, known: tuple[str, ...], hint: str = "") -> dict:
+    """The mapping under ``key`` (empty when absent), with no key outside ``known``."""
+    value = raw.get(key) or {}
+    if not isinstance(value, dict):
+        raise RigError(f"{where}: key {key!r} must be a mapping{hint}")
+    bad = sorted(set(value) - set(known))
+    if bad:
+        raise RigError(f"{where}: unknown key(s) under {key!r}: {bad}")
     return value
 
 
@@ -159,16 +186,11 @@ def _build(raw: dict, where: str) -> Rig:
     unknown = sorted(set(raw) - _TOP_KEYS)
     if unknown:
         raise RigError(f"{where}: unknown key(s) {unknown}; known: {sorted(_TOP_KEYS)}")
-    units = raw.get("units") or {}
-    if not isinstance(units, dict):
-        raise RigError(f"{where}: key 'units' must be a mapping (time, displacement, speed, sensitivity_mv_per_um)")
-    bad = sorted(set(units) - {"time", "displacement", "speed", "sensitivity_mv_per_um"})
-    if bad:
-        raise RigError(f"{where}: unknown key(s) under 'units': {bad}")
+    unit_keys = ("time", "displacement", "speed", "sensitivity_mv_per_um")
+    units = _section(where, raw, "units", unit_keys, f" ({', '.join(unit_keys)})")
     time_unit = _choice(where, "units.time", units.get("time", "s"), TIME_UNITS)
     disp = _choice(where, "units.displacement", units.get("displacement", "um"), (*DISPLACEMENT_UNITS, *VOLT_UNITS))
-    sens = _num(where, "units.sensitivity_mv_per_um", units.get("sensitivity_mv_per_um"), positive=True,
-                allow_none=True)
+    sens = _positive(where, "units.sensitivity_mv_per_um", units.get("sensitivity_mv_per_um"), allow_none=True)
     if disp in VOLT_UNITS and sens is None:
         raise RigError(f"{where}: key 'units.sensitivity_mv_per_um' is needed for displacement in {disp} "
                        "(API 670 probes: 7.87 mV/um)")
@@ -193,12 +215,11 @@ def _build(raw: dict, where: str) -> Rig:
         extra = sorted(set(item) - {"name", "angle_deg", "plane", "axial_position_m"})
         if extra:
             raise RigError(f"{where}: key {key!r}: unknown key(s) {extra}")
-        ang = _num(where, f"{key}.angle_deg", item["angle_deg"])
-        if abs(ang) > 360:
-            raise RigError(f"{where}: key '{key}.angle_deg': {ang:g} is not an angle in degrees (-360..360)")
+        ang = _in_range(where, f"{key}.angle_deg", item["angle_deg"], -360.0, 360.0,
+                        "{v:g} is not an angle in degrees (-360..360)")
         probes.append(Probe(str(item["name"]), math.radians(ang), str(item.get("plane", "A"))))
         if "axial_position_m" in item:
-            z = _num(where, f"{key}.axial_position_m", item["axial_position_m"])
+            z = _number(where, f"{key}.axial_position_m", item["axial_position_m"])
             z_plane = probe_z.setdefault(probes[-1].plane, z)
             if z_plane != z:
                 raise RigError(f"{where}: key '{key}.axial_position_m': {z:g} m, but plane {probes[-1].plane!r} "
@@ -221,7 +242,8 @@ def _build(raw: dict, where: str) -> Rig:
                            f"{math.degrees(a.angle):g} and {math.degrees(b.angle):g} deg are (nearly) collinear; "
                            "an X-Y pair is mounted 90 deg apart")
         pos = planes_raw.get(pl, {}) if isinstance(planes_raw, dict) else {}
-        planes[pl] = _num(where, f"planes.{pl}.axial_position_m", pos.get("axial_position_m", probe_z.get(pl, 0.0)))
+        planes[pl] = _number(where, f"planes.{pl}.axial_position_m",
+                             pos.get("axial_position_m", probe_z.get(pl, 0.0)))
     model = raw.get("model", "auto")
     _choice(where, "model", model, ("auto", "translation", "tilt"))
     if model == "auto":
@@ -232,26 +254,20 @@ def _build(raw: dict, where: str) -> Rig:
         z = list(planes.values())
         if abs(z[1] - z[0]) <= 0:
             raise RigError(f"{where}: key 'planes': the two planes need different axial_position_m for the tilt")
-    disk = raw.get("disk") or {}
-    if not isinstance(disk, dict):
-        raise RigError(f"{where}: key 'disk' must be a mapping")
-    bad = sorted(set(disk) - {"ip", "polar_inertia_kg_m2", "diametral_inertia_kg_m2", "mass_kg"})
-    if bad:
-        raise RigError(f"{where}: unknown key(s) under 'disk': {bad}")
+    disk = _section(where, raw, "disk", ("ip", "polar_inertia_kg_m2", "diametral_inertia_kg_m2", "mass_kg"))
     if "ip" in disk:
-        ip = _num(where, "disk.ip", disk["ip"])
+        ip = _number(where, "disk.ip", disk["ip"])
     elif "polar_inertia_kg_m2" in disk or "diametral_inertia_kg_m2" in disk:
-        ipol = _num(where, "disk.polar_inertia_kg_m2", disk.get("polar_inertia_kg_m2"), positive=True)
-        idia = _num(where, "disk.diametral_inertia_kg_m2", disk.get("diametral_inertia_kg_m2"), positive=True)
+        ipol = _positive(where, "disk.polar_inertia_kg_m2", disk.get("polar_inertia_kg_m2"))
+        idia = _positive(where, "disk.diametral_inertia_kg_m2", disk.get("diametral_inertia_kg_m2"))
         ip = ipol / idia
     else:
         ip = 0.0
     if model == "translation":
         ip = 0.0  # the Jeffcott rotor's translation has no gyroscopic coupling
-    if not 0.0 <= ip < 1.0:
-        raise RigError(f"{where}: key 'disk': inertia ratio ip = {ip:g} must be in [0, 1) for this model "
-                       "(a disk with I_p >= I_t has no forward critical)")
-    mass = _num(where, "disk.mass_kg", disk.get("mass_kg"), positive=True, allow_none=True)
+    ip = _in_range(where, "disk", ip, 0.0, 1.0, "inertia ratio ip = {v:g} must be in [0, 1) for this model "
+                   "(a disk with I_p >= I_t has no forward critical)", below_hi=True)
+    mass = _positive(where, "disk.mass_kg", disk.get("mass_kg"), allow_none=True)
     kp, sp = raw.get("keyphasor", None), raw.get("speed", None)
     if kp is None and sp is None:
         kp = "kp"
@@ -260,8 +276,8 @@ def _build(raw: dict, where: str) -> Rig:
     return Rig(
         probes=tuple(probes), keyphasor=kp, speed=sp, time=str(raw.get("time", "t")), time_unit=time_unit,
         displacement=disp, sensitivity_mv_per_um=sens, speed_unit=speed_unit,
-        keyphasor_threshold=_num(where, "keyphasor_threshold", raw.get("keyphasor_threshold"), allow_none=True),
+        keyphasor_threshold=_number(where, "keyphasor_threshold", raw.get("keyphasor_threshold"), allow_none=True),
         planes=planes, model=model, ip=ip, mass_kg=mass,
-        slow_roll_rpm=_num(where, "slow_roll_rpm", raw.get("slow_roll_rpm"), positive=True, allow_none=True),
+        slow_roll_rpm=_positive(where, "slow_roll_rpm", raw.get("slow_roll_rpm"), allow_none=True),
         source=where,
     )
