@@ -11,7 +11,10 @@ is neither a misalignment nor a breathing crack) and two faults at once.  Rules:
 * no crack (``asymmetry``, ``breathing_crack``) named for a rotor without one;
 * no effect systematically missed: each effect named, alone, with its size within 5 %,
   in at least 10 of its 12 cases;
-* every lookalike and two-fault case right.
+* every lookalike and two-fault case right;
+* the rub: named alone with its contact stiffness and friction within 5 % and its scanned
+  clearance within 2 %, never named for a rotor without one (a stiffness change, a
+  quadratic stiffness), its hidden values a rotor that touches and stays stable.
 
 The confusion matrix is printed (``pytest -s``) and by ``scripts/confusion_matrix.py``
 for the README.  The cases run in two worker processes.
@@ -71,6 +74,49 @@ def test_no_effect_is_systematically_missed(outcomes):
         mine = [o for o in outcomes if o.case.name == name and o.case.hidden == (name,)]
         named = [o for o in mine if o.named == (name,) and all(e <= 0.05 for e in o.errors.values())]
         assert len(named) >= 10, [_describe(o) for o in mine if o not in named]
+
+
+#: the clearance scan must find the true clearance within this relative error
+CLEARANCE_TOLERANCE = 0.02
+
+
+def test_rub_cases_rub_and_stay_stable():
+    """The rub's hidden values make the rotor touch around the critical (the orbit peaks
+    at 2.5 to 7 times the clearance, the contact on for a share of the record, not all of
+    it) and stay stable (bounded, well below the divergence limit), in every run."""
+    import numpy as np
+
+    for case in [c for c in FC.hidden_effect_cases() if c.name == "rub" and c.seed == FC.SEEDS[0]]:
+        meas = case.simulate()
+        amp = np.hypot(meas.theta_x, meas.theta_y)
+        gap = case.truth["rub_clearance"]
+        share = float(np.mean(amp > gap))
+        assert 2.5 * gap < amp.max() < 0.5, (case.rotor, case.run, amp.max(), gap)
+        assert 0.2 < share < 0.8, (case.rotor, case.run, share)
+        # the contact starts near the critical 1/sqrt(1 - ip) (run-up) / ends there (coast-down)
+        critical = 1.0 / np.sqrt(1.0 - case.truth["ip"])
+        speed = meas.phi_dot[amp > gap]
+        edge = speed.min()
+        assert 0.8 * critical < edge < 1.05 * critical or case.run == "coast-down", (case.rotor, edge, critical)
+
+
+def test_rub_named_with_its_parameters(outcomes):
+    """Every rub case names the rub alone, contact stiffness and friction coefficient each
+    within 5 %, the scanned clearance within CLEARANCE_TOLERANCE (2 %), noise 5e-4, three
+    seeds, both parameter sets, run-up and coast-down."""
+    mine = [o for o in outcomes if o.case.name == "rub"]
+    assert len(mine) == 12
+    for o in mine:
+        assert o.named == ("rub",), _describe(o)
+        for p, tol in (("rub_stiffness", 0.05), ("rub_friction", 0.05), ("rub_clearance", CLEARANCE_TOLERANCE)):
+            true = o.case.truth[p]
+            assert abs(o.physical[p] - true) <= tol * true, (p, o.physical[p], true, _describe(o))
+
+
+def test_no_rub_for_a_rotor_without_one(outcomes):
+    """A stiffness change, a quadratic stiffness, any other fault: never called a rub."""
+    false_rubs = [_describe(o) for o in outcomes if "rub" in o.named and "rub" not in o.case.hidden]
+    assert not false_rubs, false_rubs
 
 
 def test_lookalikes_and_two_faults(outcomes):
