@@ -399,7 +399,7 @@ class RigStream:
                 return r, self._fail(lines[r], f"{self.name}, line {lines[r]}, column {col_name!r}: {msg}")
         return first_bad, error
 
-    def _push(self, data: np.ndarray, lines: np.ndarray, *, final: bool = False) -> np.ndarray:
+    def _push(self, data: np.ndarray, lines: np.ndarray) -> np.ndarray:
         t = data[:, self._cols[0]] * TIME_UNITS[self.rig.time_unit]
         self._last_t = float(t[-1])
         x = np.column_stack([self.rig.to_metres(data[:, c]) for c in self._cols[2:]])
