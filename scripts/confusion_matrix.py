@@ -1,6 +1,6 @@
 """The fault suite's confusion matrix (rows: truth, columns: what the diagnosis named).
 
-    .venv/bin/python scripts/confusion_matrix.py [--jobs N]
+    .venv/bin/python scripts/confusion_matrix.py [--jobs N] [--only ROW ...]
 
 Runs every case of ``tests/fault_cases.py`` (every library effect hidden in turn with two
 parameter sets, three noise seeds, run-up and coast-down; lookalike pairs the other way
@@ -23,8 +23,15 @@ import fault_cases as FC
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--jobs", type=int, default=2, help="worker processes")
+    ap.add_argument("--only", action="append", metavar="ROW",
+                    help="run only the cases of this row (truth; repeatable), e.g. --only rub")
     args = ap.parse_args(argv)
     cases = FC.hidden_effect_cases() + FC.lookalike_cases()
+    if args.only:
+        unknown = set(args.only) - {c.name for c in cases}
+        if unknown:
+            ap.error(f"no such row: {', '.join(sorted(unknown))}")
+        cases = [c for c in cases if c.name in args.only]
     from tqdm.auto import tqdm
 
     with ProcessPoolExecutor(args.jobs) as pool:

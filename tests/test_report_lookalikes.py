@@ -44,7 +44,20 @@ def _healthy():
     return diagnose(F.healthy(11, **F.FAST), model=F.BASE.model, ip=F.BASE.ip)
 
 
-CASES = {"shaft_bow": _bow, "misalignment": _forcing_2x}
+@functools.cache
+def _rub():
+    return diagnose(F.rub(1, **F.FAST), model=F.BASE.model, ip=F.BASE.ip)
+
+
+@functools.cache
+def _stiffer():
+    """A healthy rotor 10 % stiffer than its model: a stiffness change, no rub."""
+    params = F.BASE.params(None, k=1.1)
+    return diagnose(F._run(params, 1, F.NOISE, F.RUN_UP, F.FAST["t_end"], F.FAST["dt"]), model=F.BASE.model,
+                    ip=F.BASE.ip)
+
+
+CASES = {"shaft_bow": _bow, "misalignment": _forcing_2x, "rub": _rub}
 
 
 class _Report(HTMLParser):
@@ -169,6 +182,44 @@ def test_misalignment_lookalikes_are_ranked_below(tmp_path):
         assert row[1] and all(cell != "-" for cell in row[2:]), row
         assert row[3].endswith("%")
         assert row[4].startswith("0x static" if EFFECTS[name].orders[0] == 0 else "+")
+
+
+def test_rub_told_from_stiffness_by_where_it_acts(tmp_path):
+    """rub vs stiffness / quadratic stiffness: the evidence is where the misfit sits.  The
+    starting model refitted to the samples below the scanned clearance leaves noise only
+    (a stiffness change would act there too), above it many times the floor; the JSON
+    (``candidates[*].evidence.lookalikes.acts_where``), the summary and the report say so."""
+    import json
+
+    d = _rub()
+    assert d.missing == ["rub"]
+    out = json.loads(d.to_json())
+    cand = next(c for c in out["candidates"] if c["effect"] == "rub")
+    assert cand["scan"]["values"]["rub_clearance"] == pytest.approx(0.04, rel=0.02)  # faults.RUB_GAP
+    ev = cand["evidence"]["lookalikes"]
+    assert {lk["effect"] for lk in ev["lookalikes"]} == {"stiffness", "nonlinear_stiffness"}
+    where = ev["acts_where"]
+    refit = where["starting_model_refitted_over_floor"]
+    assert refit["elsewhere"] < 1.5 < 10.0 < refit["where_it_acts"], refit
+    assert where["acts_above_amplitude"] == pytest.approx(where["scanned"]["rub_clearance"], rel=0.02)
+    assert 0.0 < where["active_share"] < 0.9 and where["sweep"] == "run-up"
+    # the contact starts near the critical 1/sqrt(1 - ip) = 1.2 of the run-up
+    assert 0.9 < where["first_contact"]["speed"] < 1.2
+    assert 0.0 <= where["backward_1x_share"] <= 1.0 and 0.0 <= where["half_order_share"] <= 1.0
+    assert "rub_clearance = 0.04" in d.summary() and "refitted to the samples" in d.summary()
+    rep, _ = _parse(d.report(tmp_path / "rub.html"))
+    assert "Scanned: rub_clearance = 0.04" in rep.section and "refitted to the others" in rep.section
+
+
+def test_stiffness_change_is_not_a_rub():
+    """A stiffness change acts at every amplitude: named ``stiffness``; the rub, its
+    lookalike, is reported with its status and the clearance its scan tried."""
+    d = _stiffer()
+    assert d.missing == ["stiffness"], (d.missing, d.rejected)
+    ev = next(e for e in d.lookalikes if e["effect"] == "stiffness")
+    rows = {lk["effect"]: lk for lk in ev["lookalikes"]}
+    assert "rub" in rows and rows["rub"]["status"]
+    assert "acts_where" not in ev
 
 
 def test_healthy_report_has_no_lookalike_section(tmp_path):
