@@ -56,7 +56,7 @@ from scipy.optimize import brentq, least_squares
 
 from ..effects import EFFECTS, get_effect
 from ..measurements.vectors import SPEED_UNITS, VectorTable, order_track
-from ..simulator import compile_accel, integrate_profile, smooth_effects
+from ..simulator import call_integrate_profile, compile_accel, smooth_effects
 
 __all__ = [
     "RUNOUT",
@@ -338,7 +338,7 @@ def _transient(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: 
         state = np.array([np.real(Q0[1] * e), np.real(Q0[0] * e),
                           np.real(1j * Wg[0] * Q0[1] * e), np.real(1j * Wg[0] * Q0[0] * e)])
         buf[0, 4], buf[0, 5] = state[0], state[1]
-        done = integrate_profile(accel, state, grid, phi, Wg, model.ip, coef_struct + c, 0.0, 1, buf)
+        done = call_integrate_profile(accel, state, grid, phi, Wg, model.ip, coef_struct + c, 0.0, 1, buf)
         if done < len(grid):
             raise FloatingPointError("the synchronous model diverged (unstable parameters)")
         sims[:, 2 * j] = buf[:, 5]  # u = th_y
