@@ -147,6 +147,8 @@ def run_monitor(args: argparse.Namespace) -> int:
     if monitor is None:
         return status or 2
     summary = monitor.summary()
+    if getattr(reader, "clock", None) is not None:
+        summary = reader.clock.annotate(summary)  # s and rpm for the live view's summary too
     emit(summary)
     if live is not None:
         live.print_summary(summary)
