@@ -54,10 +54,8 @@ def test_faults_drawn_at_their_rates_inside_their_ranges():
     assert {k: plain.values[k] for k in ("tau", "beta", "c", "k")} == {k: again.values[k] for k in ("tau", "beta", "c", "k")}
 
 
-@pytest.mark.parametrize("fault", list(FAULT_RANGES))
-def test_zero_control_equals_the_simulator(fault):
-    values = {r.name: 0.5 * (r.low + r.high) + 0.1 * (r.high - r.low) for r in FAULT_RANGES[fault]}
-    params = RotorParams(effects=(*RotorParams().effects, fault), values=values)
+def _zero_control_and_simulated(params: RotorParams, fault: str) -> tuple[np.ndarray, np.ndarray]:
+    """The balancing env's samples under zero control, and the simulator's run of the same rotor."""
     env = RotorBalancingEnv(randomize=False, t_max=60.0, faults={fault: 1.0})
     env.reset(seed=0, options={"params": params})
     chunks = []
@@ -66,8 +64,14 @@ def test_zero_control_equals_the_simulator(fault):
         chunks.append(info["measurements"])
         if te or tr:
             break
-    got = np.concatenate(chunks)
-    ref = simulate(params, t_end=60.0, dt=0.01, run_up=0.01).data[1:]
+    return np.concatenate(chunks), simulate(params, t_end=60.0, dt=0.01, run_up=0.01).data[1:]
+
+
+@pytest.mark.parametrize("fault", list(FAULT_RANGES))
+def test_zero_control_equals_the_simulator(fault):
+    values = {r.name: 0.5 * (r.low + r.high) + 0.1 * (r.high - r.low) for r in FAULT_RANGES[fault]}
+    params = RotorParams(effects=(*RotorParams().effects, fault), values=values)
+    got, ref = _zero_control_and_simulated(params, fault)
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-8)
 
 
@@ -76,16 +80,7 @@ def test_rub_in_contact_equals_the_simulator():
     env's kernel in the coefficient vector): still exactly the simulator's run."""
     values = {"h": 0.0, "rub_stiffness": 0.8, "rub_friction": 0.3, "rub_clearance": 0.004}  # no dry-friction stick
     params = RotorParams(effects=(*RotorParams().effects, "rub"), values=values)
-    env = RotorBalancingEnv(randomize=False, t_max=60.0, faults={"rub": 1.0})
-    env.reset(seed=0, options={"params": params})
-    chunks = []
-    while True:
-        _, _, te, tr, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
-        chunks.append(info["measurements"])
-        if te or tr:
-            break
-    got = np.concatenate(chunks)
-    ref = simulate(params, t_end=60.0, dt=0.01, run_up=0.01).data[1:]
+    got, ref = _zero_control_and_simulated(params, "rub")
     amp = np.hypot(ref[:, 4], ref[:, 5])
     assert 0.1 < np.mean(amp > values["rub_clearance"]) < 0.9  # it touches, not all the time
     free = simulate(RotorParams(values={"h": 0.0}), t_end=60.0, dt=0.01, run_up=0.01).data[1:]
