@@ -420,3 +420,26 @@ def snapshot(
             extra += z[i] * z[i]
         J_without[g] = J_full + extra
     return J_full
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def prefix_factors(A: np.ndarray, cuts: np.ndarray, head: np.ndarray, out: np.ndarray) -> None:
+    """``out[i]`` = the triangular factor of ``head``'s rows and the rows ``A[:cuts[i]]``
+    (``cuts`` ascending; ``head``: a factor of rows before ``A``'s, zeros for none).
+
+    One pass over the rows by :func:`update_block` (no forgetting), the factor copied at
+    every cut: the factors of all prefixes for the price of one factorisation.
+    """
+    p = A.shape[1]
+    n = p - 1
+    R = head.copy()
+    col_sq = np.zeros(n)
+    sums = np.zeros(3)
+    last = 0
+    for i in range(cuts.shape[0]):
+        c = cuts[i]
+        for b0 in range(last, c, BLOCK_ROWS):
+            b1 = min(c, b0 + BLOCK_ROWS)
+            update_block(R, col_sq, sums, A[b0:b1, :n], A[b0:b1, n], 1.0)
+        out[i] = R
+        last = max(last, c)

@@ -38,6 +38,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import stats
 
 __all__ = [
@@ -77,6 +78,10 @@ def andrews_bandwidth(u: np.ndarray) -> int:
     return int(min(max(1, math.ceil(L)), max(1, m // 4)))
 
 
+#: column pairs transformed back together (each holds a spectrum and a correlation of ~m)
+_PAIRS_PER_BATCH = 32
+
+
 def long_run_covariance(u: np.ndarray, bandwidth: int | None = None) -> np.ndarray:
     """Bartlett-weighted sum of the autocovariances of ``u`` (shape ``(m, q)``), lags ``<= L``.
 
@@ -89,16 +94,21 @@ def long_run_covariance(u: np.ndarray, bandwidth: int | None = None) -> np.ndarr
     m, q = u.shape
     L = andrews_bandwidth(u) if bandwidth is None else int(bandwidth)
     L = max(0, min(L, m - 1))
-    n = 1 << int(math.ceil(math.log2(2 * m)))
-    F = np.fft.rfft(u, n, axis=0)
+    # circular correlation through the FFT; zero-padded to n >= m + L the lags up to L
+    # (and down to -L) get no wrapped-around terms (those would be lags >= m: none)
+    n = sp_fft.next_fast_len(m + L + 1, real=True)
+    F = sp_fft.rfft(u, n, axis=0)
     w = 1.0 - np.arange(L + 1) / (L + 1.0)
+    iu, ju = np.triu_indices(q)
+    v = np.empty(len(iu))
+    for a in range(0, len(iu), _PAIRS_PER_BATCH):  # batches of pairs: bounded memory
+        i, j = iu[a : a + _PAIRS_PER_BATCH], ju[a : a + _PAIRS_PER_BATCH]
+        # c[k, p] = sum_t u_i[t + k] u_j[t] for the pair p = (i, j), k >= 0 and (at the end) k < 0
+        c = sp_fft.irfft(F[:, i] * np.conj(F[:, j]), n, axis=0)
+        v[a : a + len(i)] = c[0] + (w[1:] @ (c[1 : L + 1] + c[n - L :][::-1]) if L > 0 else 0.0)
     S = np.empty((q, q))
-    for i in range(q):
-        for j in range(i, q):
-            # c[k] = sum_t u_i[t + k] u_j[t], for k >= 0 and (at the end) k < 0
-            c = np.fft.irfft(F[:, i] * np.conj(F[:, j]), n)
-            v = w[0] * c[0] + float(w[1:] @ (c[1 : L + 1] + c[n - L :][::-1])) if L > 0 else c[0]
-            S[i, j] = S[j, i] = v
+    S[iu, ju] = v
+    S[ju, iu] = v
     return S
 
 

@@ -163,8 +163,11 @@ class Effect:
         ``scanned``: the values of the scanned parameters (their defaults where absent)."""
         cy, cx = self.columns(phi, phid, phidd, th_x, th_y, w_x, w_y, ip, *self.scanned_values(scanned))
         m = np.shape(th_x)
-        Xy = np.column_stack([np.broadcast_to(np.asarray(c, dtype=float), m) for c in cy])
-        Xx = np.column_stack([np.broadcast_to(np.asarray(c, dtype=float), m) for c in cx])
+        Xy = np.empty((*m, len(cy)))
+        Xx = np.empty((*m, len(cx)))
+        for q, (a, b) in enumerate(zip(cy, cx, strict=True)):  # scalars broadcast (a constant column)
+            Xy[..., q] = a
+            Xx[..., q] = b
         return Xy, Xx
 
 

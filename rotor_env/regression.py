@@ -328,37 +328,80 @@ def build_regression(
     return Regression(spec, X, y, t, eq)
 
 
+#: effect name -> ((ip, scanned values), (X_y, X_x)): one effect's columns on one data set,
+#: kept by the caller that owns the data (a diagnosis builds the same columns for every
+#: model it tries); one entry per effect, so a scanned parameter's sweep does not pile up
+ColumnCache = dict
+
+
 def regression_arrays(
-    spec: RegressionSpec, data: np.ndarray, ip: float, control: np.ndarray | None = None
+    spec: RegressionSpec, data: np.ndarray, ip: float, control: np.ndarray | None = None,
+    cache: ColumnCache | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(X, y)`` with numpy from the effects' column functions (no compilation).
 
     Same result as :func:`build_rows` (tested); used for whole files, where it is as
-    fast and avoids compiling a builder for every model a diagnosis tries.
+    fast and avoids compiling a builder for every model a diagnosis tries.  ``cache``
+    (:data:`ColumnCache`, owned by the caller and only ever used with this ``data``)
+    keeps each effect's columns between calls.
     """
-    args = (data[:, 1], data[:, 2], data[:, 3], data[:, 4], data[:, 5], data[:, 6], data[:, 7], ip)
+    return regression_columns(spec, data, ip, cache), _response(spec, data, ip, control, cache)
+
+
+def _effect_columns(name: str, args: tuple, scanned, cache: ColumnCache | None) -> tuple[np.ndarray, np.ndarray]:
+    eff = EFFECTS[name]
+    if cache is None:
+        return eff.regressors(*args, scanned=scanned)
+    key = (args[-1], eff.scanned_values(scanned))
+    hit = cache.get(name)
+    if hit is not None and hit[0] == key:
+        return hit[1]
+    Xy, Xx = eff.regressors(*args, scanned=scanned)
+    Xy.setflags(write=False)  # shared between calls: nobody may change them
+    Xx.setflags(write=False)
+    cache[name] = (key, (Xy, Xx))
+    return Xy, Xx
+
+
+def _args(data: np.ndarray, ip: float) -> tuple:
+    return (data[:, 1], data[:, 2], data[:, 3], data[:, 4], data[:, 5], data[:, 6], data[:, 7], ip)
+
+
+def _interleave(spec: RegressionSpec, a1: np.ndarray, a2: np.ndarray) -> np.ndarray:
+    """The rows of the equations the spec uses, in the builder's order (y-equation first)."""
+    if spec.equation == "first":
+        return a1
+    if spec.equation == "second":
+        return a2
+    out = np.empty((2 * len(a1), *a1.shape[1:]))
+    out[0::2], out[1::2] = a1, a2
+    return out
+
+
+def _response(spec: RegressionSpec, data: np.ndarray, ip: float, control: np.ndarray | None,
+              cache: ColumnCache | None = None) -> np.ndarray:
+    """``y``: the measured moments less the known effects' (and the control's)."""
+    args = _args(data, ip)
     mom = np.zeros((len(data), 2)) if control is None else np.broadcast_to(np.asarray(control, float), (len(data), 2))
     y1 = data[:, 9] + ip * data[:, 2] * data[:, 6] - mom[:, 1]
     y2 = data[:, 8] - ip * data[:, 2] * data[:, 7] - mom[:, 0]
     for name, vals in spec.known.items():
         eff = EFFECTS[name]
-        Xy, Xx = eff.regressors(*args, scanned=vals)
+        Xy, Xx = _effect_columns(name, args, vals, cache)
         # one coefficient at a time, in the compiled builder's order: bit-identical rows
         for q, c in enumerate(eff.to_coefficients(vals)):
             y1 = y1 - float(c) * Xy[:, q]
             y2 = y2 - float(c) * Xx[:, q]
+    return _interleave(spec, y1, y2)
+
+
+def regression_columns(spec: RegressionSpec, data: np.ndarray, ip: float,
+                       cache: ColumnCache | None = None) -> np.ndarray:
+    """``X`` alone (the columns of the spec's effects; the known effects only move ``y``)."""
+    args = _args(data, ip)
     blocks_y, blocks_x = [], []
     for name, idx in zip(spec.effects, spec._keep, strict=True):
-        Xy, Xx = EFFECTS[name].regressors(*args, scanned=spec.scanned.get(name))
+        Xy, Xx = _effect_columns(name, args, spec.scanned.get(name), cache)
         blocks_y.append(Xy[:, list(idx)])
         blocks_x.append(Xx[:, list(idx)])
-    X1, X2 = np.hstack(blocks_y), np.hstack(blocks_x)
-    if spec.equation == "first":
-        return X1, y1
-    if spec.equation == "second":
-        return X2, y2
-    X = np.empty((2 * len(data), spec.n_columns))
-    X[0::2], X[1::2] = X1, X2
-    y = np.empty(2 * len(data))
-    y[0::2], y[1::2] = y1, y2
-    return X, y
+    return _interleave(spec, np.hstack(blocks_y), np.hstack(blocks_x))

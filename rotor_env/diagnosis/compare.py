@@ -14,7 +14,7 @@ from identifier.hac import hac_covariance, wald_test
 from ..effects import EFFECTS, PHYSICAL_EFFECTS
 from ..measurements import Measurements
 from ..params import RotorParams
-from ..regression import RegressionSpec, regression_arrays
+from ..regression import ColumnCache, RegressionSpec, regression_arrays
 from ..simulator import SimulationError, free_run
 
 
@@ -177,11 +177,27 @@ class _Data:
         #: 95 % half-width of an ip estimated from the data (0: ip given)
         self.ip_uncertainty = 0.0
         self.equation = equation
-        self.data = np.ascontiguousarray(self.meas.data)
         self.raw_data = np.ascontiguousarray(self.raw.data)
+        self.raw_columns: ColumnCache = {}  # each effect's columns on raw_data
+        self.data = np.ascontiguousarray(self.meas.data)
         #: the scanned parameters' values the models are built with (effect -> {name: value}):
         #: set by the candidate scan (:func:`.candidates._scan_parameters`), defaults elsewhere
         self.scanned: dict[str, dict[str, float]] = {}
+
+    @property
+    def data(self) -> np.ndarray:
+        """The window's samples (ten-column layout)."""
+        return self._data
+
+    @data.setter
+    def data(self, value: np.ndarray) -> None:
+        # each effect's columns on these samples (every model tried reuses them); new
+        # samples (the errors-in-variables replicates' view) start a new cache
+        self._data = value
+        self.columns: ColumnCache = {}
+        #: (effect, scanned value) -> the share of samples where the effect acts there (the
+        #: scan's activity test depends on the data alone, not on the model it is added to)
+        self.active_share: dict[tuple[str, float], float] = {}
 
 
 def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, float],
@@ -194,7 +210,8 @@ def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, fl
     """
     spec = RegressionSpec(effects=tuple(model), equation=data.equation, known=known or {},
                           scanned=getattr(data, "scanned", {}))
-    X, y = regression_arrays(spec, data.raw_data if raw else data.data, data.ip)
+    X, y = regression_arrays(spec, data.raw_data if raw else data.data, data.ip,
+                             cache=data.raw_columns if raw else data.columns)
     t_rows = np.repeat(data.meas.t, spec.rows_per_sample)
     columns, groups, extra = list(spec.columns), dict(spec.groups), []
     for e, tc in onsets.items():
