@@ -6,6 +6,7 @@ import json
 import math
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -17,6 +18,7 @@ from rotor_env.monitor import Monitor, StreamReader, cusum_threshold, simulate_a
 from rotor_env.monitor.detector import chi2_sf, norm_ppf
 from rotor_env.monitor.kernel import downdate_row
 from rotor_env.monitor.scenarios import HEALTHY_ROTORS, growing_crack, healthy, with_crack
+from rotor_env.monitor.stream import read_ahead
 
 NOISE = 5e-4
 
@@ -158,6 +160,38 @@ def test_stream_reader_equals_the_loader_and_names_a_bad_line(tmp_path, crack_04
         for c in StreamReader(path, chunk_bytes=4096):
             got.append(c)
     assert sum(len(c) for c in got) == 1499  # every row before the bad line was handed out
+
+
+def test_read_ahead_keeps_order_then_the_error_and_lets_go_early(tmp_path, crack_04):
+    path = tmp_path / "run.csv"
+    crack_04.slice_time(0, 40).to_file(path)
+    direct = list(StreamReader(path, chunk_bytes=4096))
+    ahead = list(read_ahead(StreamReader(path, chunk_bytes=4096), depth=3))
+    assert len(ahead) == len(direct)
+    for a, b in zip(ahead, direct, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # a bad line: every row before it first, then the reader's error, in the caller's thread
+    lines = path.read_text().splitlines()
+    lines[1500] = lines[1500].replace(",", ",x", 1)
+    path.write_text("\n".join(lines) + "\n")
+    got = []
+    with pytest.raises(MeasurementError, match=r"line 1501, column 'phi': 'x"):
+        for c in read_ahead(StreamReader(path, chunk_bytes=4096)):
+            got.append(c)
+    assert sum(len(c) for c in got) == 1499
+
+    # a consumer that stops early releases the reader thread, even one that never ends
+    def endless():
+        k = 0
+        while True:
+            k += 1
+            yield k
+
+    gen = read_ahead(endless(), depth=2)
+    assert [next(gen) for _ in range(5)] == [1, 2, 3, 4, 5]
+    gen.close()
+    time.sleep(0.5)
+    assert not any(t.name == "rotor-id-reader" and t.is_alive() for t in threading.enumerate())
 
 
 def test_angles_only_stream_estimates_the_rates_like_the_loader(tmp_path, crack_04):

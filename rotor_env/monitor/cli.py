@@ -81,6 +81,7 @@ def run_monitor(args: argparse.Namespace) -> int:
     from ..outputs import check_writable
     from .core import Monitor
     from .fleet import open_stream
+    from .stream import read_ahead
 
     rig = None
     if args.rig:
@@ -124,7 +125,7 @@ def run_monitor(args: argparse.Namespace) -> int:
     monitor = Monitor.load(args.resume) if args.resume else None
     status = 0
     try:
-        for chunk in reader:
+        for chunk in read_ahead(reader):  # parsing overlaps the monitor's work
             if monitor is None:
                 dt = float(chunk[1, 0] - chunk[0, 0]) if chunk.shape[0] > 1 else 0.01
                 monitor = Monitor(_config(args, dt, ip=ip, time_scale=scale))

@@ -53,6 +53,7 @@ def watch_stream(source: str, config, *, rig=None, natural_rpm: float | None = N
     stream's step (a window in time units; what ``rotor-id monitor`` passes).
     """
     from .core import Monitor, MonitorConfig
+    from .stream import read_ahead
 
     name = name or str(source)
     monitor = None
@@ -65,7 +66,7 @@ def watch_stream(source: str, config, *, rig=None, natural_rpm: float | None = N
     try:
         reader, ip, scale = open_stream(source, rig=rig, natural_rpm=natural_rpm, follow=follow,
                                         idle_exit=idle_exit)
-        for chunk in reader:
+        for chunk in read_ahead(reader):
             if monitor is None:
                 dt = float(chunk[1, 0] - chunk[0, 0]) if chunk.shape[0] > 1 else 0.01
                 cfg = config(dt, ip, scale) if callable(config) else MonitorConfig(**{"ip": ip, **config})

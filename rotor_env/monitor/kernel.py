@@ -125,7 +125,7 @@ def _spd_inverse(V, q, Vinv, L):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, gamma, mon, eff,
                    on_before, on_se, sumA, sum_s, sumV, events, ring_X, ring_y, ring_n):
     """Run the monitor over ``data`` (whole blocks) with its regression rows ``X, y``.
@@ -166,6 +166,10 @@ def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, g
     Ainv = np.empty((qmax, qmax))
     Lq = np.empty((qmax, qmax))
     s = np.empty(qmax)
+    W = np.empty((n, qmax))
+    U = np.empty((per * B, qmax))
+    P = np.empty((qmax, qmax))
+    wlag = np.zeros(L_lags + 1)
     n_ev = 0
     for b in range(nb):
         i0 = b * B
@@ -211,18 +215,12 @@ def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, g
             for lag in range(1, L_lags + 1):
                 lr += 2.0 * (1.0 - lag / (L_lags + 1.0)) * gamma[lag]
             lr = max(lr, g0)
-            for r in range(k):
-                v = yb[r]
-                for j in range(n):
-                    v -= Xb[r, j] * theta[j]
-                e[r] = v
-            for i in range(n):
-                for j in range(i, n):
-                    v = 0.0
-                    for r in range(k):
-                        v += Xb[r, i] * Xb[r, j]
-                    M[i, j] = v
-                    M[j, i] = v
+            # the HAC lags' Bartlett weights times the residual autocovariance
+            for lag in range(1, L_lags + 1):
+                wlag[lag] = (1.0 - lag / (L_lags + 1.0)) * gamma[lag]
+            Xk = Xb[:k]
+            e[:k] = yb[:k] - np.dot(Xk, theta)  # BLAS: the block's rows are contiguous
+            M[:, :] = np.dot(Xk.T, Xk)
             best = -1
             best_excess = 0.0
             for g in range(G):
@@ -242,36 +240,34 @@ def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, g
                     for j in range(n):
                         rhs[j, a] = M[j, cols[g, a]]
                 _chol_solve_drop(M, idx, m_o, rhs[:, :q], sol[:, :q], Lm, keep, 1e-10)
-                for r in range(k):
-                    for a in range(q):
-                        v = Xb[r, cols[g, a]]
-                        for c in range(m_o):
-                            if keep[c]:
-                                v -= Xb[r, idx[c]] * sol[idx[c], a]
-                        Zt[r, a] = v
+                # Z = X W: the effect's columns less their regression on the others
+                W[:, :q] = 0.0
                 for a in range(q):
-                    v = 0.0
-                    for r in range(k):
-                        v += Zt[r, a] * e[r]
-                    s[a] = v
+                    W[cols[g, a], a] = 1.0
+                    for c in range(m_o):
+                        if keep[c]:
+                            W[idx[c], a] = -sol[idx[c], a]
+                Z = np.dot(Xk, np.ascontiguousarray(W[:, :q]))
+                Zt[:k, :q] = Z
+                s[:q] = np.dot(Z.T, e[:k])
+                A[:q, :q] = np.dot(Z.T, Z)
+                for a in range(q):
                     for c in range(q):
-                        v = 0.0
+                        Vh[a, c] = g0 * A[a, c]
+                # HAC: Bartlett-weighted lags of the pooled residual autocovariance,
+                # sum_l w_l (G_l + G_l'), G_l[a, c] = sum_r Z[r, a] Z[r - l, c]: with the
+                # filtered series U[r, c] = sum_l w_l Z[r - l, c], sum_l w_l G_l = Z' U
+                if L_lags > 0:
+                    for c in range(q):
                         for r in range(k):
-                            v += Zt[r, a] * Zt[r, c]
-                        A[a, c] = v
-                        Vh[a, c] = g0 * v
-                # HAC: Bartlett-weighted lags of the pooled residual autocovariance
-                for lag in range(1, L_lags + 1):
-                    wl = (1.0 - lag / (L_lags + 1.0)) * gamma[lag]
-                    if wl == 0.0:
-                        continue
+                            v = 0.0
+                            for lag in range(1, min(L_lags, r) + 1):
+                                v += wlag[lag] * Zt[r - lag, c]
+                            U[r, c] = v
+                    P[:q, :q] = np.dot(Z.T, np.ascontiguousarray(U[:k, :q]))
                     for a in range(q):
                         for c in range(q):
-                            v = 0.0
-                            for r in range(lag, k):
-                                v += Zt[r, a] * Zt[r - lag, c]
-                            Vh[a, c] += wl * v
-                            Vh[c, a] += wl * v
+                            Vh[a, c] += P[a, c] + P[c, a]
                 # the reference's own error of the effect: A C_g A, C_g = lr c_lam (T T')_gg
                 tr_h = 0.0
                 tr_r = 0.0
@@ -389,11 +385,7 @@ def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, g
             for j in range(n):
                 idx[m_all] = j
                 m_all += 1
-            for j in range(n):
-                v = 0.0
-                for r in range(k):
-                    v += Xb[r, j] * yb[r]
-                rhs[j, 0] = v
+            rhs[:, 0] = np.dot(Xk.T, yb[:k])
             _chol_solve_drop(M, idx, n, rhs[:, :1], sol[:, :1], Lm, keep, 1e-10)
             p = 0
             for j in range(n):

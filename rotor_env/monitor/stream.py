@@ -20,10 +20,12 @@ from __future__ import annotations
 import csv
 import io
 import math
+import queue
 import select
 import sys
+import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import BinaryIO
 
@@ -33,7 +35,7 @@ from scipy.signal import savgol_filter
 from ..io import DERIVABLE, MAX_TILT, REQUIRED, UNIFORM_RTOL, MeasurementError
 from ..measurements import COLUMNS
 
-__all__ = ["StreamReader", "iter_chunks"]
+__all__ = ["StreamReader", "iter_chunks", "read_ahead"]
 
 _CHUNK_BYTES = 1 << 20
 
@@ -398,3 +400,47 @@ def iter_chunks(source, **kwargs) -> Iterator[np.ndarray]:
     """Shorthand: ``iter(StreamReader(source, **kwargs))``."""
     return iter(StreamReader(source, **kwargs))
 
+
+
+_END = object()
+
+
+def read_ahead(chunks: Iterable, depth: int = 2) -> Iterator:
+    """The items of ``chunks``, read up to ``depth`` ahead in a background thread.
+
+    Parsing (pyarrow releases the GIL) then overlaps with the caller's work on the
+    previous chunk (the monitor's compiled loop releases it too), so a stream costs the
+    slower of the two per sample rather than their sum.  Order is kept; an exception of
+    the reader reaches the caller where it happened, after every item before it.  The
+    thread is a daemon: a reader left waiting on a followed file never holds up the exit.
+    """
+    slots: queue.Queue = queue.Queue(maxsize=max(1, int(depth)))
+    stop = threading.Event()
+
+    def pump() -> None:
+        try:
+            for item in chunks:
+                while not stop.is_set():
+                    try:
+                        slots.put((item, None), timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            slots.put((_END, None))
+        except BaseException as exc:  # handed to the caller, in order
+            slots.put((_END, exc))
+
+    worker = threading.Thread(target=pump, name="rotor-id-reader", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item, exc = slots.get()
+            if exc is not None:
+                raise exc
+            if item is _END:
+                return
+            yield item
+    finally:
+        stop.set()
