@@ -55,7 +55,7 @@ from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq, least_squares
 
 from ..effects import EFFECTS, get_effect
-from ..measurements.vectors import SPEED_UNITS, VectorTable, order_track
+from ..measurements.vectors import SPEED_UNITS, OrderTracker, VectorTable
 from ..simulator import call_integrate_profile, compile_accel, smooth_effects
 
 __all__ = [
@@ -284,6 +284,9 @@ _POINTS = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [0.5, 1.0], [1.5, -0.5],
 def _quasi_steady(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: list[np.ndarray],
                   W: np.ndarray, Wdot: np.ndarray) -> np.ndarray:
     """Basis responses (rows, 2, n_basis) of the linearised model at each speed."""
+    if len(W) <= len(_POINTS):
+        # as few rows as the polynomial fit would evaluate the model at: solve each directly
+        return _steady_rows(model, coef_struct, forcing_coefs, W, Wdot)
     basis = _speed_basis
     lin = _poly_fit(lambda w, wd: np.stack(model.linearised(coef_struct, w)), _POINTS, basis)
     forc = _poly_fit(lambda w, wd: np.column_stack([model.forcing_1x(c, w, wd) for c in forcing_coefs]),
@@ -294,6 +297,12 @@ def _quasi_steady(model: SynchronousModel, coef_struct: np.ndarray, forcing_coef
         F = np.einsum("rb,bcn->rcn", X.astype(complex), forc)
         M = -(W * W)[:, None, None] * np.eye(2) - AA[:, 0] - 1j * W[:, None, None] * AA[:, 1]
         return np.linalg.solve(M, F)
+    return _steady_rows(model, coef_struct, forcing_coefs, W, Wdot)
+
+
+def _steady_rows(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: list[np.ndarray],
+                 W: np.ndarray, Wdot: np.ndarray) -> np.ndarray:
+    """:func:`_quasi_steady` row by row: the linearised model solved at each speed."""
     out = np.empty((len(W), 2, len(forcing_coefs)), dtype=complex)
     for k, (w, wd) in enumerate(zip(W, Wdot, strict=True)):
         A_q, A_w = model.linearised(coef_struct, w)
@@ -303,9 +312,21 @@ def _quasi_steady(model: SynchronousModel, coef_struct: np.ndarray, forcing_coef
     return out
 
 
-def _transient(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: list[np.ndarray],
-               tau: np.ndarray, W: np.ndarray, *, coast_down: bool) -> np.ndarray:
-    """Basis responses (rows, 2, n_basis): the model run along the speed profile, tracked per revolution."""
+@dataclass(frozen=True)
+class _Profile:
+    """The integration grid of one speed profile: times, angle and speed on the grid, and
+    the angle at the middle of each row's revolution."""
+
+    grid: np.ndarray
+    phi: np.ndarray
+    speed: np.ndarray
+    phi_rows: np.ndarray
+    tracker: OrderTracker  #: the 1X per revolution centred on each row
+
+
+def _profile(tau: np.ndarray, W: np.ndarray) -> _Profile:
+    """The grid a :func:`_transient` run follows (it depends on the time scale only, not on
+    the model: a fit's many runs at one ``w_ref`` share it)."""
     speed = PchipInterpolator(tau, W, extrapolate=True)
     w_max = float(W.max())
     lead = LEAD_IN_REVS * 2 * math.pi / max(float(W[0]), 1e-3)
@@ -327,13 +348,23 @@ def _transient(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: 
     # offset — the model's angle must be the data's, not just differ by a constant.
     phi -= np.interp(tau[0] - math.pi / W[0], grid, phi)
     phi_rows = np.interp(tau - math.pi / W, grid, phi) + math.pi
+    return _Profile(grid, phi, Wg, phi_rows, OrderTracker(grid, phi, (1,), at=phi_rows))
+
+
+def _transient(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: list[np.ndarray],
+               tau: np.ndarray, W: np.ndarray, *, coast_down: bool, profile: _Profile | None = None) -> np.ndarray:
+    """Basis responses (rows, 2, n_basis): the model run along the speed profile, tracked per
+    revolution (``profile``: :func:`_profile` of ``tau, W``, when the caller keeps it)."""
+    prof = _profile(tau, W) if profile is None else profile
+    grid, phi, Wg = prof.grid, prof.phi, prof.speed
     accel = compile_accel(model.layout)
     out = np.empty((len(tau), 2, len(forcing_coefs)), dtype=complex)
     sims = np.empty((len(grid), 2 * len(forcing_coefs)))
     buf = np.empty((len(grid), 10))
+    # start on the steady-state response at the first speed: no artificial transient
+    steady0 = _steady_rows(model, coef_struct, forcing_coefs, np.array([Wg[0]]), np.array([0.0]))[0]
     for j, c in enumerate(forcing_coefs):
-        # start on the steady-state response at the first speed: no artificial transient
-        Q0 = _quasi_steady(model, coef_struct, [c], np.array([Wg[0]]), np.array([0.0]))[0, :, 0]
+        Q0 = steady0[:, j]
         e = np.exp(1j * phi[0])
         state = np.array([np.real(Q0[1] * e), np.real(Q0[0] * e),
                           np.real(1j * Wg[0] * Q0[1] * e), np.real(1j * Wg[0] * Q0[0] * e)])
@@ -343,7 +374,7 @@ def _transient(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: 
             raise FloatingPointError("the synchronous model diverged (unstable parameters)")
         sims[:, 2 * j] = buf[:, 5]  # u = th_y
         sims[:, 2 * j + 1] = buf[:, 4]  # v = th_x
-    track = order_track(grid, sims, phi, (1,), at=phi_rows)
+    track = prof.tracker.track(sims)
     if len(track.t) != len(tau):  # pragma: no cover - the grid covers every row by construction
         raise RuntimeError("order tracking lost rows")
     vec = track.vectors[1]
@@ -363,6 +394,8 @@ class _Problem:
         self.valid = np.isfinite(self.Y)
         self.P = _probe_matrix(table)
         self.method = method
+        #: w_ref -> the transient runs' grid at that time scale (the Jacobian's columns share it)
+        self._profiles: dict[float, _Profile] = {}
         scale = np.nanmax(np.abs(self.Y))
         self.scale = float(scale) if scale > 0 else 1.0
         slots = model._slots()
@@ -427,8 +460,13 @@ class _Problem:
         if method == "transient":
             # time from the first row: a table may carry absolute time stamps (1.7e9 s), whose
             # last digits a dimensionless grid of 0.05 would not resolve
-            return _transient(model, coef, fc, (self.table.t - self.table.t[0]) * w_ref, W,
-                              coast_down=self.coast_down)
+            tau = (self.table.t - self.table.t[0]) * w_ref
+            prof = self._profiles.get(w_ref)
+            if prof is None:
+                if len(self._profiles) >= 4:  # a fit moves w_ref: keep the latest few
+                    self._profiles.pop(next(iter(self._profiles)))
+                prof = self._profiles[w_ref] = _profile(tau, W)
+            return _transient(model, coef, fc, tau, W, coast_down=self.coast_down, profile=prof)
         return _quasi_steady(model, coef, fc, W, self.Wdot_abs / w_ref**2)
 
     def expand(self, B: np.ndarray) -> np.ndarray:

@@ -142,40 +142,76 @@ def order_track(
         t = np.interp(fine, k, t)
         phi = CubicSpline(k, phi)(fine)
         xs = CubicSpline(k, xs, axis=0)(fine)
-    if revolutions < 1:
-        raise ValueError(f"revolutions must be >= 1, got {revolutions}")
-    span = 2.0 * math.pi * revolutions
-    if at is None:
-        first = math.ceil(phi[0] / (2.0 * math.pi)) * 2.0 * math.pi
-        starts = np.arange(first, phi[-1] - span + 1e-12, span)
-    else:
-        starts = np.asarray(at, dtype=float) - 0.5 * span
-        starts = starts[(starts >= phi[0]) & (starts + span <= phi[-1])]
-    stops = starts + span
-    # cumulative trapezoid of x e^{-i n phi} in phi; a block's integral is the difference
-    # of the cumulative integral at its two ends, each end interpolated inside its sample
-    # interval (the same trapezoid as on the block's samples plus its interpolated ends)
-    dphi = np.diff(phi)
-    t_mid = 0.5 * (np.interp(starts, phi, t) + np.interp(stops, phi, t))
-    speed = span / (np.interp(stops, phi, t) - np.interp(starts, phi, t))
-    out = {}
-    for n in orders:
-        rot = np.exp(-1j * n * phi)[:, None]
-        F = xs * rot
-        cum = np.concatenate([np.zeros((1, xs.shape[1]), dtype=complex),
-                              np.cumsum(0.5 * (F[1:] + F[:-1]) * dphi[:, None], axis=0)])
-        ends = []
+    track = OrderTracker(t, phi, orders, revolutions, at=at).track(xs)
+    if one:
+        return OrderTrack(track.t, track.speed, {n: v[:, 0] for n, v in track.vectors.items()})
+    return track
+
+
+class OrderTracker:
+    """:func:`order_track`'s trapezoid for one ``(t, phi)`` and its blocks, set up once.
+
+    Everything that depends on the angle alone (the blocks, their ends interpolated inside
+    their sample intervals, ``e^{-i n phi}``) is computed here; :meth:`track` then costs a
+    product, a cumulative sum and the ends per signal — for a caller that tracks many
+    signals on one angle (the synchronous model's runs at one time scale).
+    """
+
+    def __init__(self, t: np.ndarray, phi: np.ndarray, orders: tuple[int, ...] = (1,), revolutions: int = 1,
+                 *, at: np.ndarray | None = None) -> None:
+        t = np.asarray(t, dtype=float)
+        phi = np.asarray(phi, dtype=float)
+        if len(t) != len(phi):
+            raise ValueError("t and phi must have the same number of samples")
+        if revolutions < 1:
+            raise ValueError(f"revolutions must be >= 1, got {revolutions}")
+        span = 2.0 * math.pi * revolutions
+        if at is None:
+            first = math.ceil(phi[0] / (2.0 * math.pi)) * 2.0 * math.pi
+            starts = np.arange(first, phi[-1] - span + 1e-12, span)
+        else:
+            starts = np.asarray(at, dtype=float) - 0.5 * span
+            starts = starts[(starts >= phi[0]) & (starts + span <= phi[-1])]
+        stops = starts + span
+        self.n_samples = len(phi)
+        self.orders = tuple(orders)
+        self.revolutions = revolutions
+        self.t = 0.5 * (np.interp(starts, phi, t) + np.interp(stops, phi, t))
+        self.speed = span / (np.interp(stops, phi, t) - np.interp(starts, phi, t))
+        # cumulative trapezoid of x e^{-i n phi} in phi; a block's integral is the difference
+        # of the cumulative integral at its two ends, each end interpolated inside its sample
+        # interval (the same trapezoid as on the block's samples plus its interpolated ends)
+        self._dphi = np.diff(phi)[:, None]
+        self._rot = {n: np.exp(-1j * n * phi)[:, None] for n in self.orders}
+        self._ends = []
         for edge in (starts, stops):
             i = np.clip(np.searchsorted(phi, edge, side="right") - 1, 0, len(phi) - 2)
             frac = ((edge - phi[i]) / (phi[i + 1] - phi[i]))[:, None]
-            x_e = xs[i] + frac * (xs[i + 1] - xs[i])
-            f_e = x_e * np.exp(-1j * n * edge)[:, None]
-            ends.append(cum[i] + 0.5 * (F[i] + f_e) * (edge - phi[i])[:, None])
-        norm = (2.0 if np.iscomplexobj(xs) else 1.0) * math.pi * revolutions
-        out[n] = (ends[1] - ends[0]) / norm
-    if one:
-        out = {n: v[:, 0] for n, v in out.items()}
-    return OrderTrack(t_mid, speed, out)
+            self._ends.append((i, frac, {n: np.exp(-1j * n * edge)[:, None] for n in self.orders},
+                               (edge - phi[i])[:, None]))
+
+    def track(self, x: np.ndarray) -> OrderTrack:
+        """The per-block Fourier coefficients of ``x`` (1-D, or 2-D with a signal per column)."""
+        x = np.asarray(x)
+        one = x.ndim == 1
+        xs = x[:, None] if one else x
+        if xs.shape[0] != self.n_samples:
+            raise ValueError("t, x and phi must have the same number of samples")
+        out = {}
+        norm = (2.0 if np.iscomplexobj(xs) else 1.0) * math.pi * self.revolutions
+        for n in self.orders:
+            F = xs * self._rot[n]
+            cum = np.empty((len(F), xs.shape[1]), dtype=complex)
+            cum[0] = 0.0
+            np.cumsum(0.5 * (F[1:] + F[:-1]) * self._dphi, axis=0, out=cum[1:])
+            ends = []
+            for i, frac, rot_e, dist in self._ends:
+                x_e = xs[i] + frac * (xs[i + 1] - xs[i])
+                ends.append(cum[i] + 0.5 * (F[i] + x_e * rot_e[n]) * dist)
+            out[n] = (ends[1] - ends[0]) / norm
+        if one:
+            out = {n: v[:, 0] for n, v in out.items()}
+        return OrderTrack(self.t, self.speed, out)
 
 
 def keyphasor_times(t: np.ndarray, phi: np.ndarray, revolutions: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
