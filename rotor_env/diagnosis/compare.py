@@ -195,6 +195,8 @@ class _Data:
         # samples (the errors-in-variables replicates' view) start a new cache
         self._data = value
         self.columns: ColumnCache = {}
+        #: the latest models' designs on these samples (:func:`_design`)
+        self.designs: dict[str, tuple] = {}
         #: (effect, scanned value) -> the share of samples where the effect acts there (the
         #: scan's activity test depends on the data alone, not on the model it is added to)
         self.active_share: dict[tuple[str, float], float] = {}
@@ -208,6 +210,23 @@ def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, fl
     ``splits`` it has its own coefficients before the onset (its value *changes*, a
     crack that grows), in extra columns named ``<coefficient>_before``.
     """
+    # ranking a candidate fits, tests and scans the same model: its design is built once
+    # (read-only: the callers share it), the latest few kept per data set
+    key = repr((tuple(model), known or {}, dict(onsets), tuple(splits), raw, getattr(data, "scanned", {}), data.ip))
+    hit = data.designs.get(key)
+    if hit is not None:
+        return hit
+    out = _build_design(data, model, known, onsets, splits, raw)
+    for a in out[1:3]:
+        a.setflags(write=False)
+    if len(data.designs) >= 3:
+        data.designs.pop(next(iter(data.designs)))
+    data.designs[key] = out
+    return out
+
+
+def _build_design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, float],
+                  splits: Iterable[str], raw: bool):
     spec = RegressionSpec(effects=tuple(model), equation=data.equation, known=known or {},
                           scanned=getattr(data, "scanned", {}))
     X, y = regression_arrays(spec, data.raw_data if raw else data.data, data.ip,
@@ -295,6 +314,9 @@ def compare(
 def _check_finite_rows(data: _Data, X: np.ndarray, y: np.ndarray, per: int) -> None:
     """Every regression row finite, and small enough that its square is (the energies)."""
     with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(X).all() and np.isfinite(y).all() and np.abs(X).max(initial=0.0) <= 1e150 \
+                and np.abs(y).max(initial=0.0) <= 1e150:
+            return  # the usual case, without the per-row reductions
         bad = ~(np.isfinite(X).all(axis=1) & np.isfinite(y)) | (np.abs(y) > 1e150) | (np.abs(X) > 1e150).any(axis=1)
     if bad.any():
         r = int(np.argmax(bad))
