@@ -21,15 +21,23 @@ Timed in this process, in this order:
   effect, both equations stacked, as the diagnosis regresses) on the same data,
   regression building and solve timed separately (best of ``--repeat``).
 
+With ``--baseline REV`` (a git revision, e.g. the commit before a speed change) the same
+diagnosis is also timed on that revision's code, checked out into a temporary worktree
+and run in a subprocess on the same file in the same run: the ratio is the speed-up.
+
     python benchmarks/diagnosis_speed.py            # prints a Markdown table
+    python benchmarks/diagnosis_speed.py --baseline b5d27cf
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -59,17 +67,21 @@ def main(argv=None) -> int:
     ap.add_argument("--noise", type=float, default=5e-4, help="noise std on the inclination channels")
     ap.add_argument("--seed", type=int, default=0, help="seed of the noise")
     ap.add_argument("--repeat", type=int, default=3, help="timed runs of each step (best of)")
+    ap.add_argument("--baseline", metavar="REV", help="also time the diagnosis at this git revision (same data)")
     args = ap.parse_args(argv)
 
     params = RotorParams()  # Table 1
     meas = simulate(params, t_end=400.0, dt=0.01, noise=args.noise, seed=args.seed)
     candidates = [c for c in LIBRARY_CANDIDATES if c not in DEFAULT_MODEL]
 
+    baseline = None
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "table1_noisy.csv"
         meas.to_file(path)
         size_mb = path.stat().st_size / 1e6
         load_times, loaded = timed(lambda: load_measurements(path), args.repeat)
+        if args.baseline:
+            baseline = _time_revision(args.baseline, path, Path(tmp), params.ip, args.repeat)
     assert np.array_equal(loaded.data, meas.data)
 
     t0 = time.perf_counter()
@@ -113,6 +125,9 @@ def main(argv=None) -> int:
          f"ip = {est.ip:.4f}; target: {'met' if min(est_times) < TARGET_S else 'NOT met'}"),
         ("diagnose, probe runout (the bow's lookalike): best", min(fault_times),
          f"verdict {fault.verdict}, added: {', '.join(fault.missing) or 'nothing'}; target: {'met' if min(fault_times) < TARGET_S else 'NOT met'}"),
+        *([(f"diagnose at {args.baseline} (same file, same run, its own code): best", baseline["best"],
+            f"this revision is {baseline['best'] / best:.2f}x faster; it found: "
+            f"{', '.join(baseline['missing']) or 'nothing'}")] if baseline else []),
         ("peer: build_regression, full model, both eqs", min(build_times),
          f"{reg.X.shape[0]} x {reg.X.shape[1]}"),
         ("peer: one numpy.linalg.lstsq, full model", min(solve_times), "same regression"),
@@ -132,6 +147,41 @@ def main(argv=None) -> int:
     print(f"diagnose / (build + one lstsq) = {best / peer:.0f}x; "
           f"diagnose / load = {best / min(load_times):.1f}x")
     return 0 if max(best, min(est_times), min(fault_times)) < TARGET_S else 1
+
+
+_BASELINE_SNIPPET = """
+import json, sys, time
+from rotor_env.diagnosis import DEFAULT_MODEL, LIBRARY_CANDIDATES, diagnose
+from rotor_env.io import load_measurements
+path, ip, repeat = sys.argv[1], float(sys.argv[2]), int(sys.argv[3])
+m = load_measurements(path)
+cands = [c for c in LIBRARY_CANDIDATES if c not in DEFAULT_MODEL]
+r = diagnose(m, DEFAULT_MODEL, candidates=cands, ip=ip)
+times = []
+for _ in range(repeat):
+    t0 = time.perf_counter()
+    diagnose(m, DEFAULT_MODEL, candidates=cands, ip=ip)
+    times.append(time.perf_counter() - t0)
+print(json.dumps({"best": min(times), "missing": list(r.missing)}))
+"""
+
+
+def _time_revision(rev: str, csv: Path, tmp: Path, ip: float, repeat: int) -> dict:
+    """The warm diagnosis of ``csv`` with the code of git revision ``rev`` (a temporary worktree)."""
+    root = Path(__file__).resolve().parents[1]
+    tree = tmp / "baseline"
+    try:
+        subprocess.run(["git", "-C", str(root), "worktree", "add", "--detach", str(tree), rev], check=True,
+                       capture_output=True, text=True)
+    except (OSError, subprocess.CalledProcessError) as exc:
+        raise SystemExit(f"--baseline {rev}: cannot check it out with git ({getattr(exc, 'stderr', exc)})") from None
+    try:
+        env = {**os.environ, "PYTHONPATH": str(tree)}
+        out = subprocess.run([sys.executable, "-c", _BASELINE_SNIPPET, str(csv), repr(ip), str(repeat)], env=env,
+                             cwd=tree, check=True, capture_output=True, text=True)
+        return json.loads(out.stdout.strip().splitlines()[-1])
+    finally:
+        subprocess.run(["git", "-C", str(root), "worktree", "remove", "--force", str(tree)], capture_output=True)
 
 
 def _with_runout(clean, noise: float, seed: int, r: float = 0.015, gamma: float = 2.0):

@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import fft as sp_fft
+from scipy import signal as sp_signal
 from scipy import stats
 
 __all__ = [
@@ -78,10 +78,6 @@ def andrews_bandwidth(u: np.ndarray) -> int:
     return int(min(max(1, math.ceil(L)), max(1, m // 4)))
 
 
-#: column pairs transformed back together (each holds a spectrum and a correlation of ~m)
-_PAIRS_PER_BATCH = 32
-
-
 def long_run_covariance(u: np.ndarray, bandwidth: int | None = None) -> np.ndarray:
     """Bartlett-weighted sum of the autocovariances of ``u`` (shape ``(m, q)``), lags ``<= L``.
 
@@ -94,21 +90,15 @@ def long_run_covariance(u: np.ndarray, bandwidth: int | None = None) -> np.ndarr
     m, q = u.shape
     L = andrews_bandwidth(u) if bandwidth is None else int(bandwidth)
     L = max(0, min(L, m - 1))
-    # circular correlation through the FFT; zero-padded to n >= m + L the lags up to L
-    # (and down to -L) get no wrapped-around terms (those would be lags >= m: none)
-    n = sp_fft.next_fast_len(m + L + 1, real=True)
-    F = sp_fft.rfft(u, n, axis=0)
-    w = 1.0 - np.arange(L + 1) / (L + 1.0)
-    iu, ju = np.triu_indices(q)
-    v = np.empty(len(iu))
-    for a in range(0, len(iu), _PAIRS_PER_BATCH):  # batches of pairs: bounded memory
-        i, j = iu[a : a + _PAIRS_PER_BATCH], ju[a : a + _PAIRS_PER_BATCH]
-        # c[k, p] = sum_t u_i[t + k] u_j[t] for the pair p = (i, j), k >= 0 and (at the end) k < 0
-        c = sp_fft.irfft(F[:, i] * np.conj(F[:, j]), n, axis=0)
-        v[a : a + len(i)] = c[0] + (w[1:] @ (c[1 : L + 1] + c[n - L :][::-1]) if L > 0 else 0.0)
-    S = np.empty((q, q))
-    S[iu, ju] = v
-    S[ju, iu] = v
+    # sum_{l=1..L} w_l Gamma_l = u' V with V[s] = sum_l w_l u[s - l] (u filtered by the
+    # Bartlett weights: one FFT convolution per column), and Gamma_{-l} = Gamma_l', so
+    # S = u'u + u'V + V'u: two products instead of q^2 cross-correlations
+    S = u.T @ u
+    if L > 0:
+        w = 1.0 - np.arange(1, L + 1) / (L + 1.0)
+        V = sp_signal.oaconvolve(u, np.concatenate([[0.0], w])[:, None], mode="full", axes=0)[:m]
+        P = u.T @ V
+        S = S + P + P.T
     return S
 
 

@@ -358,8 +358,9 @@ class RecursiveQR:
         if X.shape[0] == 0:
             return
         top = np.empty(self.n + 1)
-        top[: self.n] = np.max(np.abs(X), axis=0)
-        top[self.n] = np.max(np.abs(y))
+        # max |x| as max(max x, -min x): no temporary |X| (a pass over memory saved)
+        top[: self.n] = np.maximum(X.max(axis=0), -X.min(axis=0))
+        top[self.n] = max(float(y.max()), -float(y.min()))
         scaled = top * self.scale
         out = (top > 0) & ((scaled > 2.0**_SCALE_LIMIT) | (scaled < 2.0**-_SCALE_LIMIT))
         if not out.any():

@@ -59,7 +59,7 @@ class SplitScan:
             bad = [c for c in cols if not 0 <= c < p - 1]
             if bad:
                 raise ValueError(f"{name}: column {bad[0]} is not a regressor column (0..{p - 2})")
-        top = np.max(np.abs(A), axis=0)
+        top = np.maximum(A.max(axis=0), -A.min(axis=0))  # max |A| without a temporary |A|
         self._scale = np.where(top > 0, np.ldexp(1.0, -np.frexp(top)[1]), 1.0)
         self._A = np.ascontiguousarray(A * self._scale)
         self._before, self._after = list(before), list(after)

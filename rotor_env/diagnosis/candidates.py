@@ -261,7 +261,11 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
         # the residual's energy left after its regression on the columns (last diagonal of R)
         left = np.linalg.qr(np.column_stack([Xc, base.residual]), mode="r")[-1, -1] ** 2
         corr = math.sqrt(max(0.0, 1.0 - left / rr)) if rr > 0 else 0.0
-        prof = _order_profile(data, Xc @ np.ones(Xc.shape[1]))
+        # the columns' order spectrum depends on the data alone: each round reuses it
+        key = repr((name, onset, data.scanned.get(name)))
+        prof = data.order_profiles.get(key)
+        if prof is None:
+            prof = data.order_profiles[key] = _order_profile(data, Xc @ np.ones(Xc.shape[1]))
         overlap = float(prof @ res_profile / (np.linalg.norm(prof) * np.linalg.norm(res_profile) + 1e-300))
         drop = (base.energy - comp.energy) / base.energy if base.energy > 0 else 0.0
         gain = comp.fit_percent - base.fit_percent

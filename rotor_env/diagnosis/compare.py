@@ -197,6 +197,8 @@ class _Data:
         self.columns: ColumnCache = {}
         #: the latest models' designs on these samples (:func:`_design`)
         self.designs: dict[str, tuple] = {}
+        #: (effect, onset, scanned values) -> the order spectrum of its columns (the evidence)
+        self.order_profiles: dict[str, np.ndarray] = {}
         #: (effect, scanned value) -> the share of samples where the effect acts there (the
         #: scan's activity test depends on the data alone, not on the model it is added to)
         self.active_share: dict[tuple[str, float], float] = {}
