@@ -25,6 +25,9 @@ import warnings
 import faults as F
 import numpy as np
 import pytest
+
+# xdist (--dist loadgroup): the coverage study's fixture runs once, on one worker
+pytestmark = pytest.mark.xdist_group("coverage")
 from scipy import stats
 
 from rotor_env.diagnosis import diagnose, fit

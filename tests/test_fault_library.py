@@ -27,6 +27,9 @@ from concurrent.futures import ProcessPoolExecutor
 import fault_cases as FC
 import pytest
 
+# xdist (--dist loadgroup): the suite's outcomes (a module fixture of ~150 diagnoses) are computed once, on one worker
+pytestmark = pytest.mark.xdist_group("fault_library")
+
 
 @pytest.fixture(scope="module")
 def outcomes():

@@ -13,6 +13,9 @@ import pytest
 pytest.importorskip("ray.rllib")
 pytest.importorskip("torch")
 
+# xdist (--dist loadgroup): one trained policy fixture, on one worker
+pytestmark = pytest.mark.xdist_group("rllib")
+
 from agents.rllib import load_rllib_policy, train_rllib
 from agents.training import make_env
 
