@@ -13,11 +13,12 @@ import pytest
 pytest.importorskip("ray.rllib")
 pytest.importorskip("torch")
 
-# xdist (--dist loadgroup): one trained policy fixture, on one worker
-pytestmark = pytest.mark.xdist_group("rllib")
 
 from agents.rllib import load_rllib_policy, train_rllib
 from agents.training import make_env
+
+# xdist (--dist loadgroup): one trained policy fixture, on one worker
+pytestmark = pytest.mark.xdist_group("rllib")
 
 RUN_UP = "rotor_env/RotorRunUp-v0"
 #: one tiny iteration: 2 envs x 64 steps, one epoch of one minibatch
