@@ -11,4 +11,4 @@ if ! command -v chromium >/dev/null && [ "$(id -u)" -eq 0 ] && command -v apt-ge
     || echo "run-tests.sh: warning: could not install chromium; the browser test will skip (fail in CI)" >&2
 fi
 .venv/bin/python -m ruff check .
-.venv/bin/python -m pytest -n 2 --dist loadgroup "$@"
+.venv/bin/python -m pytest -n 2 "$@"

@@ -119,3 +119,17 @@ def restore_effect_registry():
     yield
     EFFECTS.clear()
     EFFECTS.update(saved)
+
+
+#: modules whose tests take the longest (minutes of CPU between them): collected first, so
+#: that the two xdist workers start on them and finish on the many short tests, instead of
+#: one worker running a long test alone at the end (the fault suite first: one worker runs
+#: it in a pool of two while the other waits for its result, see test_fault_library)
+HEAVY_FIRST = ("test_fault_library", "test_measured_data", "test_report_browser", "test_coverage",
+               "test_rllib", "test_diagnosis", "test_monitor_fleet", "test_fleet", "test_monitor_rig")
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {name: i for i, name in enumerate(HEAVY_FIRST)}
+    # a stable sort: the order inside each module is kept
+    items.sort(key=lambda item: rank.get(item.path.stem, len(HEAVY_FIRST)))

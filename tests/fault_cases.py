@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 from rotor_env.effects import EFFECTS, PHYSICAL_EFFECTS
 from rotor_env.params import RotorParams
@@ -141,6 +141,19 @@ class Outcome:
     errors: dict      # parameter -> relative error (angles: absolute, rad)
     right: bool
     physical: dict = field(default_factory=dict)  # the identified parameters of the final model
+
+
+def outcome_to_json(o: Outcome) -> dict:
+    """An outcome as JSON-able data (the suite's result shared between test processes)."""
+    return {"case": asdict(o.case), "named": list(o.named), "verdict": o.verdict, "errors": o.errors,
+            "right": o.right, "physical": o.physical}
+
+
+def outcome_from_json(d: dict) -> Outcome:
+    c = d["case"]
+    case = Case(c["name"], tuple(c["hidden"]), c["truth"], tuple(c["effects"]), tuple(c["start_model"]), c["run"],
+                c["seed"], c["rotor"], tuple(c["checked"]))
+    return Outcome(case, tuple(d["named"]), d["verdict"], d["errors"], d["right"], d["physical"])
 
 
 def run_case(case: Case) -> Outcome:

@@ -32,9 +32,6 @@ from rotor_env.diagnosis.compare import _Data, _known, compare
 from rotor_env.simulator import RunUp, simulate
 from rotor_env.walkthrough import HIDDEN, NOISE
 
-# xdist (--dist loadgroup): the coverage study's fixture runs once, on one worker
-pytestmark = pytest.mark.xdist_group("coverage")
-
 DEMO_MODEL = ("unbalance", "viscous_damping", "structural_damping", "asymmetry")
 DEMO_ONSET = {"asymmetry": HIDDEN.crack.time}
 DEMO_SEEDS = range(100, 200)

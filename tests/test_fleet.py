@@ -23,8 +23,6 @@ from rotor_env.simulator import RunUp, simulate
 
 ray = pytest.importorskip("ray")
 
-# xdist (--dist loadgroup): one local Ray and one batch fixture, on one worker
-pytestmark = pytest.mark.xdist_group("fleet")
 
 
 SHORT = {"t_end": 120.0, "dt": 0.02, "run_up": RunUp(rate=0.025), "noise": 5e-4}

@@ -17,9 +17,6 @@ pytest.importorskip("torch")
 from agents.rllib import load_rllib_policy, train_rllib
 from agents.training import make_env
 
-# xdist (--dist loadgroup): one trained policy fixture, on one worker
-pytestmark = pytest.mark.xdist_group("rllib")
-
 RUN_UP = "rotor_env/RotorRunUp-v0"
 #: one tiny iteration: 2 envs x 64 steps, one epoch of one minibatch
 TINY = {"n_envs": 2, "n_steps": 64, "batch_size": 128, "n_epochs": 1}
