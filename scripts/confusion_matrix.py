@@ -19,7 +19,6 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import sys  # noqa: E402
-from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
@@ -39,10 +38,7 @@ def main(argv=None) -> int:
         if unknown:
             ap.error(f"no such row: {', '.join(sorted(unknown))}")
         cases = [c for c in cases if c.name in args.only]
-    from tqdm.auto import tqdm
-
-    with ProcessPoolExecutor(args.jobs) as pool:
-        outcomes = list(tqdm(pool.map(FC.run_case, cases), total=len(cases), desc="fault suite", unit="case"))
+    outcomes = FC.run_suite(cases, jobs=args.jobs, progress=True)
     rows, cols, counts = FC.confusion(outcomes)
     print("| truth \\ named | " + " | ".join(cols) + " |")
     print("|---|" + "---:|" * len(cols))

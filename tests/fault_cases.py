@@ -143,6 +143,20 @@ class Outcome:
     physical: dict = field(default_factory=dict)  # the identified parameters of the final model
 
 
+def run_suite(cases: list[Case] | None = None, jobs: int = 2, progress: bool = False) -> list[Outcome]:
+    """Every case (default: the whole suite) in ``jobs`` worker processes, in order."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    cases = hidden_effect_cases() + lookalike_cases() if cases is None else cases
+    with ProcessPoolExecutor(jobs) as pool:
+        out = pool.map(run_case, cases, chunksize=4)
+        if progress:
+            from tqdm.auto import tqdm
+
+            out = tqdm(out, total=len(cases), desc="fault suite", unit="case")
+        return list(out)
+
+
 def outcome_to_json(o: Outcome) -> dict:
     """An outcome as JSON-able data (the suite's result shared between test processes)."""
     return {"case": asdict(o.case), "named": list(o.named), "verdict": o.verdict, "errors": o.errors,

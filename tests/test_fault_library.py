@@ -23,17 +23,10 @@ for the README.  The cases run in two worker processes.
 from __future__ import annotations
 
 import json
-from concurrent.futures import ProcessPoolExecutor
 
 import fault_cases as FC
 import pytest
 from filelock import FileLock
-
-
-def _run_suite() -> list:
-    cases = FC.hidden_effect_cases() + FC.lookalike_cases()
-    with ProcessPoolExecutor(2) as pool:
-        return list(pool.map(FC.run_case, cases, chunksize=4))
 
 
 @pytest.fixture(scope="session")
@@ -42,12 +35,12 @@ def outcomes(tmp_path_factory, worker_id):
     to get here runs the suite (in a pool of two processes) while the others wait on the
     lock, then read its JSON (the pattern of pytest-xdist's documentation)."""
     if worker_id == "master":
-        return _run_suite()
+        return FC.run_suite()
     path = tmp_path_factory.getbasetemp().parent / "fault_suite_outcomes.json"
     with FileLock(f"{path}.lock"):
         if path.is_file():
             return [FC.outcome_from_json(d) for d in json.loads(path.read_text())]
-        out = _run_suite()
+        out = FC.run_suite()
         path.write_text(json.dumps([FC.outcome_to_json(o) for o in out]))
         return out
 

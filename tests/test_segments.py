@@ -6,16 +6,13 @@ import pytest
 from identifier.segments import SplitScan, split_energies
 
 
-def _refit(A, c, before, after):
+def _refit(lstsq, A, c, before, after):
+    """The split model refitted: the columns zeroed where absent, then least squares
+    (``ref.lstsq``: equilibrated, as the columns span twelve orders of magnitude)."""
     X = A[:, :-1].copy()
     X[:c, list(before)] = 0.0
     X[c:, list(after)] = 0.0
-    # columns scaled to unit norm first: lstsq's rank cut is relative to the largest
-    # singular value, and the columns span twelve orders of magnitude
-    norm = np.linalg.norm(X, axis=0)
-    norm[norm == 0] = 1.0
-    theta, *_ = np.linalg.lstsq(X / norm, A[:, -1], rcond=None)
-    r = A[:, -1] - (X / norm) @ theta
+    r = A[:, -1] - X @ lstsq(X, A[:, -1])
     return float(r @ r)
 
 
@@ -31,12 +28,12 @@ def _data(seed, m=900, n=6):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize(("before", "after"), [((2,), ()), ((), (1, 4)), ((0,), (5,))])
-def test_energies_equal_a_refit_at_every_cut(seed, before, after):
+def test_energies_equal_a_refit_at_every_cut(ref, seed, before, after):
     A = _data(seed)
     cuts = np.array([0, 1, 7, 64, 65, 300, 599, 600, 601, 899, 900])
     J = split_energies(A, cuts, before, after)
-    ref = np.array([_refit(A, c, before, after) for c in cuts])
-    np.testing.assert_allclose(J, ref, rtol=1e-9)
+    refits = np.array([_refit(ref.lstsq, A, c, before, after) for c in cuts])
+    np.testing.assert_allclose(J, refits, rtol=1e-9)
 
 
 def test_a_change_is_found_where_it_is():
@@ -48,15 +45,15 @@ def test_a_change_is_found_where_it_is():
     assert cuts[np.argmin(J)] == 600
 
 
-def test_refine_reuses_the_coarse_factors():
+def test_refine_reuses_the_coarse_factors(ref):
     A = _data(4)
     scan = SplitScan(A, before=[2])
     coarse = np.arange(0, 901, 100)
     Jc = scan.energies(coarse)
     fine = np.arange(500, 701, 7)
     Jf = scan.refine(5, 7, fine)
-    np.testing.assert_allclose(Jf, [_refit(A, c, [2], []) for c in fine], rtol=1e-9)
-    np.testing.assert_allclose(Jc, [_refit(A, c, [2], []) for c in coarse], rtol=1e-9)
+    np.testing.assert_allclose(Jf, [_refit(ref.lstsq, A, c, [2], []) for c in fine], rtol=1e-9)
+    np.testing.assert_allclose(Jc, [_refit(ref.lstsq, A, c, [2], []) for c in coarse], rtol=1e-9)
     with pytest.raises(ValueError, match="cuts must be ascending"):
         scan.refine(0, 1, [50, 20])  # the last scan's cuts are the fine ones now: rows 500..507
 
@@ -76,9 +73,9 @@ def test_bad_input_is_named(A, cuts, kw, match):
         split_energies(A, cuts, **kw)
 
 
-def test_a_duplicated_column_is_dropped_not_fitted_to_rounding():
+def test_a_duplicated_column_is_dropped_not_fitted_to_rounding(ref):
     A = _data(5)
     A2 = np.column_stack([A[:, :-1], 3.0 * A[:, 1], A[:, -1]])  # column 6 = 3 x column 1
     cuts = np.array([0, 100, 450, 900])
     J = split_energies(A2, cuts)
-    np.testing.assert_allclose(J, [_refit(A, c, (), ()) for c in cuts], rtol=1e-9)
+    np.testing.assert_allclose(J, [_refit(ref.lstsq, A, c, (), ()) for c in cuts], rtol=1e-9)
