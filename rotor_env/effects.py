@@ -75,10 +75,27 @@ class Parameter:
     #: this many values spaced geometrically over ``[lower, upper]`` (then refines around
     #: the best); 0: an ordinary parameter, mapped to coefficients by ``to_coefficients``
     scan_points: int = 0
+    #: > 0: an *orientation* the keyphasor cannot know (a crack's weak axis on the shaft, the
+    #: stiff axis of the supports), periodic with this period [rad].  Like a scanned parameter
+    #: it is an argument of the column function (after the scanned ones, in declaration order);
+    #: the equation-error regression builds its columns at the declared value (the default, 0:
+    #: the axis at the keyphasor notch, the paper's convention), the output-error fit
+    #: (:mod:`rotor_env.diagnosis.output_error`) estimates it with the coefficients
+    angle_period: float = 0.0
 
     @property
     def scanned(self) -> bool:
         return self.scan_points > 0
+
+    @property
+    def orientation(self) -> bool:
+        """An orientation angle (see :attr:`angle_period`)."""
+        return self.angle_period > 0
+
+    @property
+    def argument(self) -> bool:
+        """Passed to the column function as an argument (scanned, or an orientation)."""
+        return self.scanned or self.orientation
 
     def scan_grid(self) -> np.ndarray:
         """The scan's grid: ``scan_points`` values spaced geometrically over ``[lower, upper]``."""
@@ -143,15 +160,26 @@ class Effect:
         return tuple(p for p in self.parameters if p.scanned)
 
     @property
+    def argument_parameters(self) -> tuple[Parameter, ...]:
+        """The parameters passed to the column function as arguments, in declaration order:
+        the scanned ones, then the orientations (see :attr:`Parameter.angle_period`)."""
+        return (*self.scanned_parameters, *(p for p in self.parameters if p.orientation and not p.scanned))
+
+    @property
+    def orientation_parameters(self) -> tuple[Parameter, ...]:
+        return tuple(p for p in self.parameters if p.orientation)
+
+    @property
     def kernel_width(self) -> int:
         """Slots of the effect in the simulator's coefficient vector: its coefficients, then
-        the values of its scanned parameters."""
-        return len(self.coefficients) + len(self.scanned_parameters)
+        the values of its argument parameters (scanned, orientations)."""
+        return len(self.coefficients) + len(self.argument_parameters)
 
     def scanned_values(self, values: Mapping[str, float] | None = None) -> tuple[float, ...]:
-        """The scanned parameters' values from ``values`` (their defaults where absent)."""
+        """The column function's argument values (scanned parameters, then orientations)
+        from ``values`` (their defaults where absent)."""
         values = values or {}
-        return tuple(float(values.get(p.name, p.default)) for p in self.scanned_parameters)
+        return tuple(float(values.get(p.name, p.default)) for p in self.argument_parameters)
 
     def kernel_values(self, values: Mapping[str, float]) -> tuple[float, ...]:
         """The effect's slots of the simulator's coefficient vector (see :attr:`kernel_width`)."""
@@ -191,10 +219,12 @@ def _viscous(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
     return (-w_y,), (-w_x,)
 
 
-def _asymmetry(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
+def _asymmetry(phi, phid, phidd, th_x, th_y, w_x, w_y, ip, axis=0.0):
     # double-angle from sin/cos(phi): once inlined in the simulator, the compiler shares
-    # them with the unbalance's (two trigonometric calls per evaluation instead of four)
-    s, c = np.sin(phi), np.cos(phi)
+    # them with the unbalance's (two trigonometric calls per evaluation instead of four).
+    # ``axis``: the stiff body axis u at the shaft angle ``axis`` from the keyphasor notch:
+    # the whole pattern turns with phi - axis
+    s, c = np.sin(phi - axis), np.cos(phi - axis)
     s2, c2 = 2.0 * s * c, c * c - s * s
     return (-(th_y * c2 + th_x * s2),), (-(th_y * s2 - th_x * c2),)
 
@@ -236,9 +266,11 @@ def _shaft_bow(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
     return (c, -s), (s, c)
 
 
-def _support_anisotropy(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
-    # k_y = 1 + delta, k_x = 1 - delta (fixed frame): M = -delta conj(z)
-    return (-th_y,), (th_x,)
+def _support_anisotropy(phi, phid, phidd, th_x, th_y, w_x, w_y, ip, axis=0.0):
+    # stiffer by delta along a fixed direction at ``axis`` from the model's y axis, softer
+    # across it: M = -delta e^{2 i axis} conj(z) (axis 0: k_y = 1 + delta, k_x = 1 - delta)
+    s2, c2 = np.sin(2.0 * axis), np.cos(2.0 * axis)
+    return (-(c2 * th_y + s2 * th_x),), (-(s2 * th_y - c2 * th_x),)
 
 
 def _cross_coupled(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
@@ -254,8 +286,10 @@ def _misalignment(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
     return (c2, -s2, c2, -s2), (s2, c2, -s2, -c2)
 
 
-def _breathing_crack(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
-    s, c = np.sin(phi), np.cos(phi)
+def _breathing_crack(phi, phid, phidd, th_x, th_y, w_x, w_y, ip, axis=0.0):
+    # ``axis``: the crack's direction on the shaft from the keyphasor notch (the whole
+    # pattern turns with phi - axis)
+    s, c = np.sin(phi - axis), np.cos(phi - axis)
     s2, c2 = 2.0 * s * c, c * c - s * s
     # G = z + conj(z) e^{2 i phi} = 2 xi e^{i phi}, xi the deflection across the crack
     g_y = th_y + th_y * c2 + th_x * s2
@@ -421,12 +455,14 @@ register_effect(
     Effect(
         name="asymmetry",
         parameters=(Parameter("D", 0.03, "stiffness asymmetry (k_u - k_v)/2k: a crack, a keyway", -0.15, 0.15,
-                            "a crack through half the shaft lowers one bending stiffness by about 30 %: |D| <= 0.15"),),
+                            "a crack through half the shaft lowers one bending stiffness by about 30 %: |D| <= 0.15"),
+                    Parameter("D_axis", 0.0, "angle of the stiff body axis u (the weak axis v is 90 deg on) from "
+                              "the keyphasor notch, in the direction of rotation [rad]", angle_period=math.pi)),
         coefficients=("D",),
         columns=_asymmetry,
         to_coefficients=_to,
         from_coefficients=_from,
-        moment="-D (th_y cos2phi + th_x sin2phi),  -D (th_y sin2phi - th_x cos2phi)",
+        moment="-D e^{2 i (phi - axis)} conj(z)  (axis 0: -D (th_y cos2phi + th_x sin2phi),  -D (th_y sin2phi - th_x cos2phi))",
         cause="unsymmetrical shaft stiffness: a breathing or open crack, a keyway, a flat",
         signature="splits the critical speed into sqrt(k-D)..sqrt(k+D), unstable in between; "
         "a whirl at frequency w leaves order 2 - w/speed (a static side load: 2x, the crack's classic "
@@ -568,12 +604,14 @@ register_effect(
         name="support_anisotropy",
         parameters=(Parameter("support_anisotropy", 0.05, "support stiffness split (k_y - k_x)/2k, fixed frame",
                               -0.3, 0.3, "supports whose stiffnesses differ by a factor above 1.9 (0.3) are a "
-                              "broken pedestal, not an anisotropy"),),
+                              "broken pedestal, not an anisotropy"),
+                    Parameter("support_axis", 0.0, "angle of the stiff support direction from the model's y axis "
+                              "(the probes' frame, not the keyphasor's) [rad]", angle_period=math.pi)),
         coefficients=("support_anisotropy",),
         columns=_support_anisotropy,
         to_coefficients=_to,
         from_coefficients=_from,
-        moment="-delta conj(z):  -delta th_y,  +delta th_x",
+        moment="-delta e^{2 i axis} conj(z) (axis 0:  -delta th_y,  +delta th_x)",
         cause="bearing pedestals or foundation stiffer in one direction than the other (fixed frame, "
         "not turning with the shaft)",
         signature="two criticals sqrt(1 -+ delta); elliptic orbits: the forward 1x response mirrored into "
@@ -641,6 +679,8 @@ register_effect(
                       "1: fully open to closed)", 0.0, 1.3, "the opening cannot swing beyond fully open and "
                       "closed (1; +30 % for noise)"),
             Parameter("breathing_phase", 0.0, "angle at which the crack is fully open [rad]"),
+            Parameter("crack_axis", 0.0, "direction of the crack on the shaft from the keyphasor notch, in the "
+                      "direction of rotation [rad]", angle_period=2 * math.pi),
         ),
         coefficients=("crack_mean", "crack_breathing_cos", "crack_breathing_sin"),
         columns=_breathing_crack,

@@ -110,7 +110,8 @@ class RegressionSpec:
             eff = get_effect(name)
             if name in effects:
                 raise ValueError(f"effect {name!r} is both estimated and known")
-            missing = set(eff.parameter_names) - set(vals)
+            # an orientation left out is the declared default (the axis at the keyphasor notch)
+            missing = set(eff.parameter_names) - set(vals) - {p.name for p in eff.orientation_parameters}
             if missing:
                 raise ValueError(f"known effect {name!r} lacks parameter(s) {sorted(missing)}")
         columns: list[str] = []
@@ -138,7 +139,7 @@ class RegressionSpec:
         for name, vals in dict(self.scanned).items():
             if name not in effects:
                 continue  # a scan value of an effect not in this model: not used
-            allowed = {p.name for p in EFFECTS[name].scanned_parameters}
+            allowed = {p.name for p in EFFECTS[name].argument_parameters}
             unknown = set(vals) - allowed
             if unknown:
                 raise ValueError(f"effect {name!r} scans {sorted(allowed)}, not {sorted(unknown)}")
@@ -180,7 +181,7 @@ class RegressionSpec:
             full[list(idx)] = theta[pos : pos + len(idx)]
             pos += len(idx)
             out.update(eff.from_coefficients(full))
-            out.update(zip((p.name for p in eff.scanned_parameters), self.scan_values(e), strict=True))
+            out.update(zip((p.name for p in eff.argument_parameters), self.scan_values(e), strict=True))
         return out
 
     def scan_values(self, effect: str) -> tuple[float, ...]:
@@ -192,7 +193,7 @@ class RegressionSpec:
 
     def builder(self):
         """The compiled row builder ``build(data, ip, known_coef, X, y)`` (cached)."""
-        scan = tuple((e, self.scan_values(e)) for e in (*self.known, *self.effects) if EFFECTS[e].scanned_parameters)
+        scan = tuple((e, self.scan_values(e)) for e in (*self.known, *self.effects) if EFFECTS[e].argument_parameters)
         key = (self.effects, self.equation, tuple(self.known), self._keep, scan)
         fn = _BUILDERS.get(key)
         if fn is None:

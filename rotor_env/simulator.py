@@ -134,7 +134,7 @@ def compile_accel(effects: tuple[str, ...]):
         nc = len(eff.coefficients)
         # a scanned parameter (the rub's clearance) rides in the coefficient vector after
         # the effect's coefficients and is passed to its column function
-        extra = "".join(f", coef[{j + nc + s}]" for s in range(len(eff.scanned_parameters)))
+        extra = "".join(f", coef[{j + nc + s}]" for s in range(len(eff.argument_parameters)))
         lines.append(f"    cy, cx = f{i}(phi, phid, phidd, th_x, th_y, w_x, w_y, ip{extra})")
         for q in range(nc):
             lines.append(f"    a_y += coef[{j + q}] * cy[{q}]")
