@@ -1,0 +1,618 @@
+"""Output-error identification: the model fitted where the data were measured.
+
+Why
+---
+The equation error (PHYSICS.md section 3) needs the second derivative of the measured
+displacements.  A rig records displacements with noise; differentiating twice multiplies
+the noise at frequency ``f`` by ``(2 pi f)^2``, so at 0.5 um probe noise the equation error
+is noise at every speed and its energy no longer moves when an effect is added.  The
+output error ``e = y - y_hat(theta)`` compares the *measured displacements* with the
+model's predicted response: its noise is the probes' own, and what is left above it is
+the model's misfit.  This is the prediction-error method (Ljung, *System Identification*,
+2nd ed., ch. 7; MATLAB's ``pem``/``oe``) for the rotor's equations.
+
+What we chose: multiple shooting with the start states projected out
+--------------------------------------------------------------------
+A free run of a lightly damped rotor through its critical from one start state is a
+badly conditioned, multi-modal problem (a 0.5 % error of the natural frequency turns the
+phase of the free whirl by half a turn over a few hundred periods).  Multiple shooting
+(Bock 1983; Voss, Timmer & Kurths 2004) cuts the record into ``S`` segments of a few
+natural periods, each starting from its own state ``x0_s = (th_x, th_y, th_x', th_y')``:
+
+    min over theta, x0_1..x0_S   sum_s sum_{k in s} |y_k - C x(t_k; theta, x0_s)|^2
+
+We do not enforce continuity between segments: every segment's start state is a free
+nuisance parameter (4 per segment), eliminated at every Gauss-Newton step by variable
+projection (Golub & Pereyra 1973): the segment's rows of the Jacobian and residual are
+projected on the orthogonal complement of its start-state columns, and the reduced
+problem in ``theta`` alone is solved with Levenberg-Marquardt damping.  What this gives
+up is the information in the free whirl's continuity across a cut (little, when a
+segment holds a few periods); what it buys is a fit that is stable through the
+critical from an equation-error start, with no divergence of a long free run.
+
+Why not a Kalman predictor: a one-step predictor with process noise would fit the
+model's misfit into its state and leave white innovations even for a wrong model — the
+diagnosis needs the misfit to *stay* in the residual, where the missing effect's orders
+can be read; the segments' free start states absorb only the transient.
+
+Sensitivities
+-------------
+The model is ``x' = f(x, t; theta, a)`` with the effects' coefficients ``theta`` (linear in
+``f``) and argument parameters ``a`` (orientations, the rub's clearance).  The forward
+sensitivities ``S = dx/d(theta, a, x0)`` obey ``S' = A S + B`` with ``A = df/dx`` and
+``B = df/d(theta, a)``; the compiled kernel integrates them with the state by the same
+RK4 steps (one per sample, the spin between samples at constant acceleration, as the
+simulator follows a measured profile).  ``B`` for a coefficient is the effect's column
+itself; ``A`` and ``B`` for an argument are forward differences of the *column functions*
+at the current state (exact for the linear effects, whose columns are linear in ``x``),
+never differences of whole runs.
+
+Uncertainty
+-----------
+``Cov(theta) = (J'J)^-1 S (J'J)^-1`` with ``J`` the projected Jacobian and ``S`` the
+Bartlett (Newey-West) long-run covariance of the scores ``J_k' e_k`` per time sample
+(:mod:`identifier.hac`): the prediction errors of a decimated, filtered probe signal are
+coloured, and a misfit leaves them slowly varying.  The intervals cover the parameters
+of the best model in the class the fit is given: their coverage on noisy probes is
+measured by simulation in the tests.
+
+Relation to the equation-error method
+-------------------------------------
+The paper's equation-error regression (and its recursive QR) stays the fast start and
+the on-line core of the wrapper and the monitor: it is linear, needs no simulation and
+is exact on clean or finely sampled angles.  Its estimates are biased by the noise of
+estimated rates (errors in variables); the output-error fit starts from them and removes
+that bias, at the cost of a simulation per iteration.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from identifier.hac import andrews_bandwidth, chi2_log10_sf, long_run_covariance
+
+from ..effects import EFFECTS, Effect
+
+__all__ = [
+    "OutputErrorFit",
+    "ShootingGrid",
+    "fit_output_error",
+    "library_effects",
+    "noise_std_high_band",
+]
+
+#: segment length of the multiple shooting, in the model's time unit (about two natural
+#: periods: the free whirl from the start state is a small part of the prediction)
+SEGMENT_LENGTH = 12.0
+#: model time step of the shooting grid aimed at (RK4 per sample; the record is low-pass
+#: decimated to it when finer)
+GRID_DT = 0.05
+#: at least this many samples per revolution at the top speed on the shooting grid
+GRID_PER_TURN = 24
+#: forward-difference step for A = df/dx (relative to 1 + |x|) and for the arguments
+_FD_STATE = 1e-7
+_FD_ARG = 1e-6
+
+
+def library_effects() -> tuple[str, ...]:
+    """The smooth library effects the output-error kernel is compiled for (set-valued dry
+    friction is not: its stick phases make the sensitivities meaningless)."""
+    from .. import effects as effects_module
+
+    out = []
+    for name, eff in EFFECTS.items():
+        col = eff.columns
+        if eff.dry_friction:
+            continue
+        if getattr(effects_module, getattr(col, "__name__", ""), None) is not col:
+            continue  # a user effect: its source may change under the same name
+        out.append(name)
+    return tuple(out)
+
+
+# ------------------------------------------------------------------ the compiled kernel
+_KERNEL_TEMPLATE = '''
+@njit(cache=True)
+def rhs(ph, pd, pdd, x, S, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, fx, fS):
+    columns(ph, pd, pdd, x[0], x[1], x[2], x[3], ip, arg, active, cy, cx)
+    ay = -ip * pd * x[2]
+    ax = ip * pd * x[3]
+    for j in pidx:
+        ay += theta[j] * cy[j]
+        ax += theta[j] * cx[j]
+    fx[0] = x[2]
+    fx[1] = x[3]
+    fx[2] = ax
+    fx[3] = ay
+    nf = S.shape[1]
+    for c in range(nf):
+        fS[0, c] = S[2, c]
+        fS[1, c] = S[3, c]
+        fS[2, c] = 0.0
+        fS[3, c] = 0.0
+    for m in range(4):
+        for q in range(4):
+            xp[q] = x[q]
+        h = FD_STATE * (1.0 + abs(x[m]))
+        xp[m] += h
+        columns(ph, pd, pdd, xp[0], xp[1], xp[2], xp[3], ip, arg, active, cy2, cx2)
+        ay2 = -ip * pd * xp[2]
+        ax2 = ip * pd * xp[3]
+        for j in pidx:
+            ay2 += theta[j] * cy2[j]
+            ax2 += theta[j] * cx2[j]
+        dax = (ax2 - ax) / h
+        day = (ay2 - ay) / h
+        for c in range(nf):
+            fS[2, c] += dax * S[m, c]
+            fS[3, c] += day * S[m, c]
+    npar = pidx.shape[0]
+    for i in range(npar):
+        j = pidx[i]
+        fS[2, i] += cx[j]
+        fS[3, i] += cy[j]
+    for i in range(qidx.shape[0]):
+        for q in range(arg.shape[0]):
+            argp[q] = arg[q]
+        argp[qidx[i]] += FD_ARG
+        columns(ph, pd, pdd, x[0], x[1], x[2], x[3], ip, argp, active, cy2, cx2)
+        gy = 0.0
+        gx = 0.0
+        for j in range(qlo[i], qhi[i]):
+            gy += theta[j] * (cy2[j] - cy[j])
+            gx += theta[j] * (cx2[j] - cx[j])
+        fS[2, npar + i] += gx / FD_ARG
+        fS[3, npar + i] += gy / FD_ARG
+
+
+@njit(cache=True)
+def shoot(t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, qlo, qhi, ip, pred, jac):
+    ncol = theta.shape[0]
+    cy = np.zeros(ncol)
+    cx = np.zeros(ncol)
+    cy2 = np.zeros(ncol)
+    cx2 = np.zeros(ncol)
+    xp = np.zeros(4)
+    argp = arg.copy()
+    nf = jac.shape[2]
+    nx0 = nf - 4
+    S = np.zeros((4, nf))
+    x = np.zeros(4)
+    xs = np.zeros(4)
+    Ss = np.zeros((4, nf))
+    k1 = np.zeros(4)
+    k2 = np.zeros(4)
+    k3 = np.zeros(4)
+    k4 = np.zeros(4)
+    K1 = np.zeros((4, nf))
+    K2 = np.zeros((4, nf))
+    K3 = np.zeros((4, nf))
+    K4 = np.zeros((4, nf))
+    for s in range(seg.shape[0]):
+        i0 = seg[s, 0]
+        i1 = seg[s, 1]
+        for q in range(4):
+            x[q] = x0[s, q]
+        S[:, :] = 0.0
+        for q in range(4):
+            S[q, nx0 + q] = 1.0
+        pred[i0, 0] = x[0]
+        pred[i0, 1] = x[1]
+        for c in range(nf):
+            jac[i0, 0, c] = S[0, c]
+            jac[i0, 1, c] = S[1, c]
+        for k in range(i0, i1):
+            dt = t[k + 1] - t[k]
+            a = (phid[k + 1] - phid[k]) / dt
+            p0 = phi[k]
+            w0 = phid[k]
+            rhs(p0, w0, a, x, S, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k1, K1)
+            hh = 0.5 * dt
+            for q in range(4):
+                xs[q] = x[q] + hh * k1[q]
+            for q in range(4):
+                for c in range(nf):
+                    Ss[q, c] = S[q, c] + hh * K1[q, c]
+            pm = p0 + w0 * hh + 0.5 * a * hh * hh
+            wm = w0 + a * hh
+            rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k2, K2)
+            for q in range(4):
+                xs[q] = x[q] + hh * k2[q]
+            for q in range(4):
+                for c in range(nf):
+                    Ss[q, c] = S[q, c] + hh * K2[q, c]
+            rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k3, K3)
+            for q in range(4):
+                xs[q] = x[q] + dt * k3[q]
+            for q in range(4):
+                for c in range(nf):
+                    Ss[q, c] = S[q, c] + dt * K3[q, c]
+            pe = p0 + w0 * dt + 0.5 * a * dt * dt
+            we = w0 + a * dt
+            rhs(pe, we, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k4, K4)
+            for q in range(4):
+                x[q] += dt / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
+            for q in range(4):
+                for c in range(nf):
+                    S[q, c] += dt / 6.0 * (K1[q, c] + 2.0 * K2[q, c] + 2.0 * K3[q, c] + K4[q, c])
+            if not (abs(x[0]) < DIVERGED and abs(x[1]) < DIVERGED and abs(x[2]) < DIVERGED
+                    and abs(x[3]) < DIVERGED):
+                return k + 1
+            pred[k + 1, 0] = x[0]
+            pred[k + 1, 1] = x[1]
+            for c in range(nf):
+                jac[k + 1, 0, c] = S[0, c]
+                jac[k + 1, 1, c] = S[1, c]
+    return 0
+'''
+
+
+@dataclass(frozen=True)
+class _Kernel:
+    module: object
+    effects: tuple[str, ...]
+    coef_slots: dict  #: effect -> (lo, hi) in theta
+    arg_slots: dict  #: effect -> (lo, hi) in arg
+    n_coef: int
+    n_arg: int
+
+
+_KERNELS: dict[tuple[str, ...], _Kernel] = {}
+
+
+def _kernel(effects: tuple[str, ...]) -> _Kernel:
+    """The compiled shooting kernel for these effects (all of them can be switched on or off
+    per call: one compilation, cached on disk, serves every candidate model)."""
+    if effects in _KERNELS:
+        return _KERNELS[effects]
+    from .. import effects as effects_module
+    from ..simulator import load_generated
+
+    head = ["import math", "", "import numpy as np", "from numba import njit", "",
+            f"FD_STATE = {_FD_STATE!r}", f"FD_ARG = {_FD_ARG!r}", "DIVERGED = 1e3", ""]
+    body = ["@njit(cache=True)",
+            "def columns(phi, phid, phidd, thx, thy, wx, wy, ip, arg, active, cy, cx):"]
+    coef_slots, arg_slots = {}, {}
+    j = a = 0
+    for i, name in enumerate(effects):
+        eff: Effect = EFFECTS[name]
+        fn = eff.columns.__name__
+        head.append(f"from rotor_env.effects import {fn} as _c{i}")
+        head.append(f"f{i} = njit(inline='always')(_c{i})")
+        nc, na = len(eff.coefficients), len(eff.argument_parameters)
+        extra = "".join(f", arg[{a + q}]" for q in range(na))
+        body.append(f"    if active[{i}]:")
+        body.append(f"        ry, rx = f{i}(phi, phid, phidd, thx, thy, wx, wy, ip{extra})")
+        for q in range(nc):
+            body.append(f"        cy[{j + q}] = ry[{q}]")
+            body.append(f"        cx[{j + q}] = rx[{q}]")
+        coef_slots[name] = (j, j + nc)
+        arg_slots[name] = (a, a + na)
+        j += nc
+        a += na
+    text = ("# generated by rotor_env.diagnosis.output_error; safe to delete\n" + "\n".join(head) + "\n\n"
+            + "\n".join(body) + "\n\n" + _KERNEL_TEMPLATE)
+    module = load_generated("rotor_id_oe", text, (Path(__file__), Path(effects_module.__file__)))
+    if module is None:  # pragma: no cover - unwritable cache folder: compile in memory
+        namespace: dict = {}
+        exec(compile(text, "<rotor_id_oe>", "exec"), namespace)
+        module = type("M", (), namespace)
+    k = _Kernel(module, effects, coef_slots, arg_slots, j, a)
+    _KERNELS[effects] = k
+    return k
+
+
+# ------------------------------------------------------------------ the data
+@dataclass(frozen=True)
+class ShootingGrid:
+    """The record on the shooting grid (dimensionless): time, spin, measured tilts, the
+    segments and the start states' first guesses.
+
+    ``y`` holds ``(th_x, th_y)``; ``noise_std`` the probes' noise per grid sample (same
+    unit), when known; ``segments`` ``(S, 2)`` first and last sample of each segment.
+    """
+
+    t: np.ndarray
+    phi: np.ndarray
+    phid: np.ndarray
+    y: np.ndarray
+    rates: np.ndarray  #: (N, 2) estimated (th_x', th_y'): start states only
+    segments: np.ndarray
+    ip: float
+    noise_std: float | None = None
+    decimation: int = 1
+
+    @classmethod
+    def from_arrays(cls, t, phi, phid, th_x, th_y, ip: float, *, noise_std: float | None = None,
+                    segment_length: float = SEGMENT_LENGTH, grid_dt: float | None = None) -> ShootingGrid:
+        """Decimate (zero-phase FIR) to the grid step and cut the segments."""
+        from scipy.signal import decimate, savgol_filter
+
+        t = np.asarray(t, float)
+        dt0 = float(np.median(np.diff(t)))
+        top = float(np.max(np.abs(phid)))
+        target = grid_dt if grid_dt is not None else min(GRID_DT, 2 * math.pi / (GRID_PER_TURN * max(top, 1e-9)))
+        q = max(1, int(target // dt0))
+        if q > 1:
+            thx = decimate(np.asarray(th_x, float), q, ftype="fir", zero_phase=True)
+            thy = decimate(np.asarray(th_y, float), q, ftype="fir", zero_phase=True)
+            sel = slice(None, None, q)
+            t, phi, phid = t[sel], np.asarray(phi, float)[sel], np.asarray(phid, float)[sel]
+            n = min(len(t), len(thx))
+            t, phi, phid, thx, thy = t[:n], phi[:n], phid[:n], thx[:n], thy[:n]
+            # the FIR filter rings at the ends: half a segment off each end
+            cut = max(1, int(round(0.5 * segment_length / (dt0 * q))))
+            if n > 6 * cut:
+                keep = slice(cut, n - cut)
+                t, phi, phid, thx, thy = t[keep], phi[keep], phid[keep], thx[keep], thy[keep]
+        else:
+            thx, thy = np.asarray(th_x, float), np.asarray(th_y, float)
+        dt = float(np.median(np.diff(t)))
+        y = np.column_stack([thx, thy])
+        win = max(5, int(round(1.0 / dt)) | 1)
+        win = min(win, (len(t) - 1) | 1 if len(t) % 2 == 0 else len(t))
+        rates = np.column_stack([savgol_filter(y[:, c], win, 3, deriv=1, delta=dt) for c in range(2)])
+        per = max(8, int(round(segment_length / dt)))
+        starts = np.arange(0, len(t) - 1, per)
+        if len(starts) > 1 and len(t) - 1 - starts[-1] < per // 2:  # a stub at the end joins its neighbour
+            starts = starts[:-1]
+        # each sample in one segment: a segment ends one sample before the next one starts
+        ends = np.append(starts[1:] - 1, len(t) - 1)
+        seg = np.column_stack([starts, ends]).astype(np.int64)
+        sigma = None if noise_std is None else float(noise_std) / math.sqrt(q)
+        return cls(t, np.asarray(phi, float), np.asarray(phid, float), y, rates, seg, float(ip), sigma, q)
+
+    @property
+    def n(self) -> int:
+        return len(self.t)
+
+    def start_states(self) -> np.ndarray:
+        i = self.segments[:, 0]
+        return np.column_stack([self.y[i, 0], self.y[i, 1], self.rates[i, 0], self.rates[i, 1]])
+
+
+# ------------------------------------------------------------------ the fit
+@dataclass
+class OutputErrorFit:
+    """An output-error fit: parameters, their HAC covariance, residuals, the start states."""
+
+    effects: tuple[str, ...]
+    names: tuple[str, ...]  #: free parameters: coefficients, then arguments
+    owners: tuple[str, ...]  #: the effect of each free parameter
+    values: np.ndarray
+    covariance: np.ndarray
+    rss: float
+    residual: np.ndarray  #: (N, 2) measured - predicted on the grid
+    prediction: np.ndarray
+    x0: np.ndarray
+    iterations: int
+    converged: bool
+    bandwidth: int
+    grid: ShootingGrid = field(repr=False)
+    theta_full: np.ndarray = field(repr=False, default=None)
+    arg_full: np.ndarray = field(repr=False, default=None)
+
+    @property
+    def n_rows(self) -> int:
+        return int(self.residual.size)
+
+    @property
+    def rms(self) -> float:
+        return math.sqrt(self.rss / self.n_rows)
+
+    @property
+    def std_errors(self) -> np.ndarray:
+        return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
+
+    def value(self, name: str) -> float:
+        return float(self.values[self.names.index(name)])
+
+    def parameters(self, effect: str) -> dict[str, float]:
+        """Physical parameters of ``effect`` (its declaration's mapping), orientations in
+        ``[0, period)``."""
+        eff = EFFECTS[effect]
+        coef = np.array([self.value(f"{effect}.{c}") for c in eff.coefficients])
+        out = dict(eff.from_coefficients(coef))
+        for p in eff.argument_parameters:
+            v = self.value(f"{effect}.{p.name}")
+            out[p.name] = float(v % p.angle_period) if p.orientation else float(v)
+        return out
+
+    def wald(self, effect: str) -> tuple[float, int, float]:
+        """HAC Wald test that the effect's coefficients are zero: ``(W, q, log10 p)``."""
+        idx = [i for i, (o, nm) in enumerate(zip(self.owners, self.names, strict=True))
+               if o == effect and nm.split(".", 1)[1] in EFFECTS[effect].coefficients]
+        th = self.values[idx]
+        cov = self.covariance[np.ix_(idx, idx)]
+        try:
+            w = float(th @ np.linalg.solve(cov, th))
+        except np.linalg.LinAlgError:
+            w = math.inf
+        return w, len(idx), chi2_log10_sf(w, len(idx)) if math.isfinite(w) else -math.inf
+
+
+def _free_layout(kernel: _Kernel, effects: Sequence[str], fixed_args: Mapping[str, Mapping[str, float]]):
+    pidx, qidx, qlo, qhi, names, owners = [], [], [], [], [], []
+    for e in effects:
+        lo, hi = kernel.coef_slots[e]
+        for j, c in zip(range(lo, hi), EFFECTS[e].coefficients, strict=True):
+            pidx.append(j)
+            names.append(f"{e}.{c}")
+            owners.append(e)
+    for e in effects:
+        alo, _ = kernel.arg_slots[e]
+        for q, p in enumerate(EFFECTS[e].argument_parameters):
+            if p.name in fixed_args.get(e, {}):
+                continue
+            qidx.append(alo + q)
+            lo, hi = kernel.coef_slots[e]
+            qlo.append(lo)
+            qhi.append(hi)
+            names.append(f"{e}.{p.name}")
+            owners.append(e)
+    as_int = lambda v: np.asarray(v, dtype=np.int64)  # noqa: E731
+    return as_int(pidx), as_int(qidx), as_int(qlo), as_int(qhi), tuple(names), tuple(owners)
+
+
+def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi):
+    nf = len(pidx) + len(qidx) + 4
+    pred = np.empty((grid.n, 2))
+    jac = np.empty((grid.n, 2, nf))
+    status = kernel.module.shoot(grid.t, grid.phi, grid.phid, grid.segments, x0, theta, arg, active,
+                                 pidx, qidx, qlo, qhi, grid.ip, pred, jac)
+    return status, pred, jac
+
+
+def _project(grid, r, jac, npq):
+    """Variable projection: each segment's rows on the complement of its start-state columns."""
+    rows_r, rows_j, bases = [], [], []
+    for i0, i1 in grid.segments:
+        rs = r[i0:i1 + 1].reshape(-1)
+        Js = jac[i0:i1 + 1, :, :npq].reshape(-1, npq)
+        Jx = jac[i0:i1 + 1, :, npq:].reshape(-1, 4)
+        Q, _ = np.linalg.qr(Jx)
+        rows_r.append(rs - Q @ (Q.T @ rs))
+        rows_j.append(Js - Q @ (Q.T @ Js))
+        bases.append((Jx, rs, Js))
+    return np.concatenate(rows_r), np.vstack(rows_j), bases
+
+
+def fit_output_error(
+    grid: ShootingGrid,
+    effects: Sequence[str],
+    start: Mapping[str, Mapping[str, float]] | None = None,
+    *,
+    fixed_args: Mapping[str, Mapping[str, float]] | None = None,
+    x0: np.ndarray | None = None,
+    max_iter: int = 40,
+    tol: float = 1e-8,
+) -> OutputErrorFit:
+    """Levenberg-Marquardt on the multiple-shooting output error (module docstring).
+
+    ``effects``: the model (``stiffness`` is added when absent: the time scale of measured
+    data is itself an estimate); ``start``: physical parameter values per effect (the
+    declaration's defaults where absent, 0 for a coefficient whose effect has no start);
+    ``fixed_args``: argument parameters held at a value (not fitted).
+    """
+    effects = tuple(dict.fromkeys(("stiffness", *effects)))
+    lib = library_effects()
+    for e in effects:
+        if e not in lib:
+            raise ValueError(f"effect {e!r} cannot be fitted by output error (set-valued or a user effect)")
+    kernel = _kernel(lib)
+    start = dict(start or {})
+    fixed_args = dict(fixed_args or {})
+    theta = np.zeros(kernel.n_coef)
+    arg = np.zeros(max(kernel.n_arg, 1))
+    active = np.zeros(len(lib), dtype=np.bool_)
+    for e in effects:
+        eff = EFFECTS[e]
+        active[lib.index(e)] = True
+        lo, hi = kernel.coef_slots[e]
+        if e in start:
+            vals = {p.name: p.default for p in eff.parameters} | dict(start[e])
+            theta[lo:hi] = eff.to_coefficients(vals)
+        elif e == "stiffness":
+            theta[lo:hi] = 1.0
+        alo, ahi = kernel.arg_slots[e]
+        given = {**start.get(e, {}), **fixed_args.get(e, {})}
+        arg[alo:ahi] = [float(given.get(p.name, p.default)) for p in eff.argument_parameters]
+    pidx, qidx, qlo, qhi, names, owners = _free_layout(kernel, effects, fixed_args)
+    npq = len(pidx) + len(qidx)
+    x0 = grid.start_states() if x0 is None else np.array(x0, float)
+
+    def pack():
+        return np.concatenate([theta[pidx], arg[qidx]])
+
+    def unpack(v):
+        th, ar = theta.copy(), arg.copy()
+        th[pidx] = v[:len(pidx)]
+        ar[qidx] = v[len(pidx):]
+        return th, ar
+
+    status, pred, jac = _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi)
+    if status:
+        raise FloatingPointError("the model diverged from its start values")
+    r = grid.y - pred
+    rss = float(np.sum(r * r))
+    lam = 1e-3
+    it = 0
+    converged = False
+    v = pack()
+    while it < max_iter:
+        it += 1
+        rt, Jt, bases = _project(grid, r, jac, npq)
+        scale = np.sqrt(np.sum(Jt * Jt, axis=0))
+        scale[scale == 0] = 1.0
+        Js = Jt / scale
+        JtJ = Js.T @ Js
+        g = Js.T @ rt
+        improved = False
+        for _ in range(12):
+            try:
+                d = np.linalg.solve(JtJ + lam * np.diag(np.diag(JtJ) + 1e-12), g) / scale
+            except np.linalg.LinAlgError:
+                lam *= 10
+                continue
+            v_new = v + d
+            th_new, ar_new = unpack(v_new)
+            x0_new = x0.copy()
+            for s, (Jx, rs, Jsg) in enumerate(bases):
+                x0_new[s] += np.linalg.lstsq(Jx, rs - Jsg @ d, rcond=None)[0]
+            st, p_new, j_new = _shoot(kernel, grid, x0_new, th_new, ar_new, active, pidx, qidx, qlo, qhi)
+            r_new = grid.y - p_new
+            rss_new = float(np.sum(r_new * r_new)) if st == 0 else math.inf
+            if rss_new < rss:
+                improved = True
+                drop = (rss - rss_new) / max(rss, 1e-300)
+                v, theta, arg, x0, pred, jac, r, rss = v_new, th_new, ar_new, x0_new, p_new, j_new, r_new, rss_new
+                lam = max(lam / 5.0, 1e-9)
+                break
+            lam *= 8.0
+        if not improved or drop < tol:
+            converged = True
+            break
+    # the covariance at the optimum: projected Jacobian, HAC of the per-sample scores
+    rt, Jt, _ = _project(grid, r, jac, npq)
+    bread = np.linalg.pinv(Jt.T @ Jt)
+    scores = (Jt * rt[:, None]).reshape(grid.n, 2, npq).sum(axis=1)
+    bw = andrews_bandwidth(scores)
+    S = long_run_covariance(scores, bw)
+    cov = bread @ S @ bread
+    return OutputErrorFit(effects, names, owners, v.copy(), cov, rss, r, pred, x0, it, converged, bw, grid,
+                          theta, arg)
+
+
+# ------------------------------------------------------------------ the probes' noise
+def noise_std_high_band(x: np.ndarray, dt: float, f_signal: float) -> float:
+    """Standard deviation of white sensor noise from the band above the signal.
+
+    ``x`` sampled every ``dt``; ``f_signal``: the highest frequency the rotor's response
+    holds (cycles per unit of ``dt``).  Welch's periodogram's median level over
+    ``(1.5 f_signal, 0.9 Nyquist)`` times the full band; where that band is too narrow
+    (a record sampled barely above its content), the third difference's variance
+    (20 sigma^2 for white noise; a smooth signal's third difference is small).
+    """
+    from scipy.signal import welch
+
+    x = np.asarray(x, float)
+    x = x - np.mean(x)
+    fs = 1.0 / dt
+    nyq = 0.5 * fs
+    lo = 1.5 * f_signal
+    if lo < 0.6 * nyq and len(x) >= 512:
+        nper = int(min(4096, 2 ** math.floor(math.log2(len(x) / 8))))
+        f, p = welch(x, fs=fs, nperseg=nper, detrend="linear")
+        band = (f > lo) & (f < 0.9 * nyq)
+        if band.sum() >= 8:
+            # the median of an averaged periodogram is ~the mean for white noise (chi^2 with
+            # many degrees of freedom), and a few spikes (a rub's impacts) do not lift it
+            level = float(np.median(p[band]))
+            return math.sqrt(level * nyq)
+    d3 = np.diff(x, 3)
+    return float(math.sqrt(np.median(d3 * d3) / 0.4549364231195724 / 20.0))
