@@ -91,9 +91,9 @@ __all__ = [
 SEGMENT_LENGTH = 12.0
 #: model time step of the shooting grid aimed at (RK4 per sample; the record is low-pass
 #: decimated to it when finer)
-GRID_DT = 0.05
+GRID_DT = 0.08
 #: at least this many samples per revolution at the top speed on the shooting grid
-GRID_PER_TURN = 24
+GRID_PER_TURN = 32
 #: forward-difference step for A = df/dx (relative to 1 + |x|) and for the arguments
 _FD_STATE = 1e-7
 _FD_ARG = 1e-6
@@ -489,6 +489,7 @@ def fit_output_error(
     *,
     fixed_args: Mapping[str, Mapping[str, float]] | None = None,
     x0: np.ndarray | None = None,
+    start_args: Mapping[str, Mapping[str, float]] | None = None,
     max_iter: int = 40,
     tol: float = 1e-8,
 ) -> OutputErrorFit:
@@ -497,7 +498,8 @@ def fit_output_error(
     ``effects``: the model (``stiffness`` is added when absent: the time scale of measured
     data is itself an estimate); ``start``: physical parameter values per effect (the
     declaration's defaults where absent, 0 for a coefficient whose effect has no start);
-    ``fixed_args``: argument parameters held at a value (not fitted).
+    ``fixed_args``: argument parameters held at a value (not fitted); ``start_args``:
+    argument start values (with ``start`` given as coefficient arrays).
     """
     effects = tuple(dict.fromkeys(("stiffness", *effects)))
     lib = library_effects()
@@ -514,13 +516,16 @@ def fit_output_error(
         eff = EFFECTS[e]
         active[lib.index(e)] = True
         lo, hi = kernel.coef_slots[e]
-        if e in start:
+        if e in start and isinstance(start[e], np.ndarray):
+            theta[lo:hi] = start[e]  # coefficients themselves (an equation-error start)
+        elif e in start:
             vals = {p.name: p.default for p in eff.parameters} | dict(start[e])
             theta[lo:hi] = eff.to_coefficients(vals)
         elif e == "stiffness":
             theta[lo:hi] = 1.0
         alo, ahi = kernel.arg_slots[e]
-        given = {**start.get(e, {}), **fixed_args.get(e, {})}
+        given = {**(start.get(e, {}) if not isinstance(start.get(e), np.ndarray) else {}),
+                 **(start_args or {}).get(e, {}), **fixed_args.get(e, {})}
         arg[alo:ahi] = [float(given.get(p.name, p.default)) for p in eff.argument_parameters]
     pidx, qidx, qlo, qhi, names, owners = _free_layout(kernel, effects, fixed_args)
     npq = len(pidx) + len(qidx)
@@ -586,6 +591,41 @@ def fit_output_error(
     cov = bread @ S @ bread
     return OutputErrorFit(effects, names, owners, v.copy(), cov, rss, r, pred, x0, it, converged, bw, grid,
                           theta, arg)
+
+
+def equation_error_start(grid: ShootingGrid, effects: Sequence[str]) -> dict[str, np.ndarray]:
+    """Coefficients from the equation error on the grid (Savitzky-Golay rates and
+    accelerations over about a sixth of a natural period): the output-error fit's start.
+    Biased by the noise of the estimated derivatives, which the output-error fit removes."""
+    from scipy.signal import savgol_filter
+
+    effects = tuple(dict.fromkeys(("stiffness", *effects)))
+    dt = float(np.median(np.diff(grid.t)))
+    win = max(7, int(round(1.0 / dt)) | 1)
+    y = grid.y
+    w = np.column_stack([savgol_filter(y[:, c], win, 3, deriv=1, delta=dt) for c in range(2)])
+    acc = np.column_stack([savgol_filter(y[:, c], win, 3, deriv=2, delta=dt) for c in range(2)])
+    phidd = np.gradient(grid.phid, grid.t)
+    ip = grid.ip
+    # th_y'' + ip phid th_x' = sum theta cy;  th_x'' - ip phid th_y' = sum theta cx
+    out_y = acc[:, 1] + ip * grid.phid * w[:, 0]
+    out_x = acc[:, 0] - ip * grid.phid * w[:, 1]
+    blocks_y, blocks_x, sizes = [], [], []
+    for e in effects:
+        Xy, Xx = EFFECTS[e].regressors(grid.phi, grid.phid, phidd, y[:, 0], y[:, 1], w[:, 0], w[:, 1], ip)
+        blocks_y.append(Xy)
+        blocks_x.append(Xx)
+        sizes.append(Xy.shape[1])
+    X = np.vstack([np.hstack(blocks_y), np.hstack(blocks_x)])
+    b = np.concatenate([out_y, out_x])
+    scale = np.sqrt(np.sum(X * X, axis=0))
+    scale[scale == 0] = 1.0
+    theta = np.linalg.lstsq(X / scale, b, rcond=None)[0] / scale
+    out, j = {}, 0
+    for e, n in zip(effects, sizes, strict=True):
+        out[e] = theta[j:j + n].copy()
+        j += n
+    return out
 
 
 # ------------------------------------------------------------------ the probes' noise

@@ -1,0 +1,401 @@
+"""Which effect is missing, decided on the output-error residual (measured displacements).
+
+Used whenever the rates and accelerations would have to be estimated from noisy
+displacements (always for rig waveforms).  One round tries every candidate by an
+output-error fit of the model plus the candidate (:mod:`.output_error`), and keeps it
+only if every check holds:
+
+- **significant**: the HAC Wald test of its coefficients, Bonferroni over the round's
+  candidates (``log10 p < log10(alpha / n)``);
+- **relevant**: it removes at least :data:`RELEVANT_SHARE` of the residual energy above
+  the probes' noise floor (a significant but irrelevant effect is a statistical nicety);
+- **physical**: every parameter inside its declared plausible range;
+- **a crack is not a rub** (rule ``crack_amplitude_independence``): a crack's stiffness
+  asymmetry is the same at every amplitude, a rub's contact acts only above the clearance
+  — the crack model is refitted on the low- and on the high-amplitude half of the
+  segments, and a crack whose asymmetry in the two halves differs by more than
+  :data:`CRACK_SPLIT_Z` standard errors and by a third is turned down; and a crack is
+  also turned down when the rub's own model explains the data at least as well.
+
+The best survivor (largest fall of the residual energy) is added and the next round
+starts, until the residual stands within :data:`EXPLAINED_RATIO` of the noise floor or no
+candidate survives.  The verdict is read off the final residual against the floor.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..effects import EFFECTS
+from .output_error import OutputErrorFit, ShootingGrid, equation_error_start, fit_output_error, library_effects
+
+__all__ = ["OutputErrorDiagnosis", "diagnose_output_error"]
+
+#: residual RMS within this factor of the noise floor: explained
+EXPLAINED_RATIO = 1.1
+#: a candidate must remove this share of the residual energy above the floor
+RELEVANT_SHARE = 0.1
+#: crack vs rub: the asymmetry of the low- and high-amplitude halves may differ by this
+#: many standard errors (and by a third) before the crack is turned down
+CRACK_SPLIT_Z = 4.0
+#: effects whose fit cannot start from a zero coefficient (their argument would have no
+#: sensitivity): a small start value
+_NONZERO_START = {"rub": {"rub_stiffness": 0.5, "rub_friction": 0.1}}
+MAX_ADDED = 3
+CRACKS = ("asymmetry", "breathing_crack")
+
+
+@dataclass
+class Candidate:
+    """One candidate tried in one round."""
+
+    round: int
+    effect: str
+    rms: float
+    log10_p: float
+    relevance: float
+    parameters: dict
+    intervals: dict
+    accepted: bool
+    reason: str = ""
+
+
+@dataclass
+class OutputErrorDiagnosis:
+    """The output-error diagnosis of one record (dimensionless inside; ``unit_scale`` maps a
+    grid residual to the reporting unit, ``unit`` names it)."""
+
+    model_before: tuple[str, ...]
+    model_after: tuple[str, ...]
+    before: OutputErrorFit
+    after: OutputErrorFit
+    noise_floor: float  #: per grid sample, dimensionless
+    candidates: list[Candidate]
+    added: list[str]
+    unit_scale: float = 1.0
+    unit: str = ""
+    seconds: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def rms_ratio_before(self) -> float:
+        return self.before.rms / self.noise_floor
+
+    @property
+    def rms_ratio_after(self) -> float:
+        return self.after.rms / self.noise_floor
+
+    @property
+    def missing(self) -> list[str]:
+        return list(self.added)
+
+    @property
+    def verdict(self) -> str:
+        if self.rms_ratio_after <= EXPLAINED_RATIO:
+            return "explained_after_adding" if self.added else "explained"
+        return "partly_explained" if self.added else "unexplained"
+
+    @property
+    def rejected(self) -> dict[str, str]:
+        """Each candidate turned down, with the last round's reason (one entry per effect)."""
+        out: dict[str, str] = {}
+        for c in self.candidates:
+            if not c.accepted and c.effect not in self.added:
+                out[c.effect] = f"round {c.round}: {c.reason}"
+        return out
+
+    def parameters(self) -> dict[str, dict]:
+        """Every effect of the final model: physical values and 95 % half-widths."""
+        out = {}
+        for e in self.after.effects:
+            out[e] = {"values": self.after.parameters(e), "ci95": _intervals(self.after, e)}
+        return out
+
+    def to_dict(self) -> dict:
+        s = self.unit_scale
+        return {
+            "method": "output error (multiple shooting, HAC)",
+            "verdict": self.verdict,
+            "missing": self.missing,
+            "model_before": list(self.model_before),
+            "model_after": list(self.model_after),
+            "rms_before": self.before.rms * s,
+            "rms_after": self.after.rms * s,
+            "noise_floor": self.noise_floor * s,
+            "rms_ratio_before": self.rms_ratio_before,
+            "rms_ratio_after": self.rms_ratio_after,
+            "unit": self.unit,
+            "parameters": self.parameters(),
+            "candidates": [
+                {"round": c.round, "effect": c.effect, "rms": c.rms * s, "log10_p": c.log10_p,
+                 "relevance": c.relevance, "accepted": c.accepted, "reason": c.reason,
+                 "parameters": c.parameters, "ci95": c.intervals}
+                for c in self.candidates],
+            "rejected": self.rejected,
+            "seconds": self.seconds,
+            "notes": list(self.notes),
+        }
+
+    def summary(self) -> str:
+        s, u = self.unit_scale, self.unit
+        lines = [f"verdict: {self.verdict} (output error: residual {self.rms_ratio_after:.3g}x the probes' noise "
+                 f"floor {self.noise_floor * s:.3g} {u}; starting model {self.rms_ratio_before:.3g}x)",
+                 f"model: {', '.join(self.model_before)}"
+                 + (f"  + {', '.join(self.added)}" if self.added else "")]
+        for e, d in self.parameters().items():
+            vals = ", ".join(f"{k} = {_fmt(k, v)} +- {_fmt(k, d['ci95'].get(k, math.nan))}"
+                             for k, v in d["values"].items())
+            lines.append(f"  {e}: {vals}")
+        if self.rejected:
+            lines.append("turned down:")
+            lines += [f"  {e}: {r}" for e, r in self.rejected.items()]
+        return "\n".join(lines)
+
+
+def _fmt(name: str, v: float) -> str:
+    if name.endswith("axis") or name.endswith("phase") or name == "beta":
+        return f"{math.degrees(v):.2f} deg"
+    return f"{v:.4g}"
+
+
+def _intervals(fit: OutputErrorFit, effect: str) -> dict[str, float]:
+    """95 % half-widths of the effect's physical parameters (delta method on the mapping
+    from coefficients; orientations directly)."""
+    eff = EFFECTS[effect]
+    idx = [fit.names.index(f"{effect}.{c}") for c in eff.coefficients]
+    coef = fit.values[idx]
+    cov = fit.covariance[np.ix_(idx, idx)]
+    base = eff.from_coefficients(coef)
+    out = {}
+    names = list(base)
+    grads = np.zeros((len(names), len(idx)))
+    for j in range(len(idx)):
+        h = 1e-7 * max(1e-6, float(np.max(np.abs(coef))))
+        c2 = coef.copy()
+        c2[j] += h
+        b2 = eff.from_coefficients(c2)
+        for i, n in enumerate(names):
+            d = b2[n] - base[n]
+            if "phase" in n or n == "beta":
+                d = (d + math.pi) % (2 * math.pi) - math.pi
+            grads[i, j] = d / h
+    var = np.einsum("ij,jk,ik->i", grads, cov, grads)
+    for i, n in enumerate(names):
+        out[n] = 1.96 * math.sqrt(max(var[i], 0.0))
+    for p in eff.argument_parameters:
+        k = fit.names.index(f"{effect}.{p.name}") if f"{effect}.{p.name}" in fit.names else None
+        if k is not None:
+            out[p.name] = 1.96 * math.sqrt(max(fit.covariance[k, k], 0.0))
+    return out
+
+
+def _starts(effect: str, fit: OutputErrorFit) -> list[dict]:
+    """Start values of a candidate: the base fit's coefficients, the candidate's small or
+    zero, and several values of each argument (orientations over their period, the rub's
+    clearance over the orbit's range)."""
+    eff = EFFECTS[effect]
+    base: dict = {e: fit.theta_full[slice(*_slots(e))].copy() for e in fit.effects}
+    phys = dict(_NONZERO_START.get(effect, {}))
+    args = eff.argument_parameters
+    if not args:
+        return [{**base, effect: phys}]
+    r = np.hypot(fit.grid.y[:, 0], fit.grid.y[:, 1])
+    grids = []
+    for p in args:
+        if p.orientation:
+            # two orthogonal directions of a half-turn pattern (e^{2i axis}), four of a full turn
+            n = 4 if p.angle_period > math.pi + 1e-9 else 2
+            grids.append([p.name, [k * p.angle_period / 4 for k in range(n)]])
+        else:  # the rub's clearance: where the orbit spends its time above it
+            grids.append([p.name, list(np.quantile(r, [0.6, 0.8, 0.92]))])
+    combos = [{}]
+    for name, vals in grids:
+        combos = [{**c, name: v} for c in combos for v in vals]
+    small = {"asymmetry": {"D": 0.005}, "breathing_crack": {"dk_crack": 0.02, "breathing_depth": 0.5},
+             "support_anisotropy": {"support_anisotropy": 0.01}}.get(effect, {})
+    return [{**base, effect: {**phys, **small, **c}} for c in combos]
+
+
+_SLOTS: dict = {}
+
+
+def _slots(effect: str):
+    from .output_error import _kernel
+
+    k = _kernel(library_effects())
+    return k.coef_slots[effect]
+
+
+def _fit_candidate(grid, model, effect, base_fit):
+    best = None
+    starts = _starts(effect, base_fit)
+    for st in starts:
+        # quick fits from every start, then the best one to convergence
+        try:
+            f = fit_output_error(grid, (*model, effect), st, x0=base_fit.x0, max_iter=4 if len(starts) > 1 else 40)
+        except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+            continue
+        if best is None or f.rss < best.rss:
+            best = f
+    if best is not None and len(starts) > 1:
+        st = {e: best.theta_full[slice(*_slots(e))].copy() for e in best.effects}
+        eff = EFFECTS[effect]
+        args = {p.name: best.value(f"{effect}.{p.name}") for p in eff.argument_parameters}
+        try:
+            full = fit_output_error(grid, (*model, effect), st, x0=best.x0, fixed_args=None,
+                                    max_iter=40) if not args else _refit_with_args(grid, model, effect, best, args)
+            best = full if full.rss <= best.rss else best
+        except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+            pass
+    return best
+
+
+def _refit_with_args(grid, model, effect, fit, args):
+    from .output_error import _kernel
+
+    k = _kernel(library_effects())
+    start = {e: fit.theta_full[slice(*k.coef_slots[e])].copy() for e in fit.effects}
+    # the argument values ride in through the kernel's arg vector: pass them as start values
+    fit2 = fit_output_error(grid, (*model, effect), start, x0=fit.x0, max_iter=40,
+                            fixed_args=None, start_args={effect: args})
+    return fit2
+
+
+def _physical_problem(fit: OutputErrorFit, effect: str) -> str:
+    vals = fit.parameters(effect)
+    for p in EFFECTS[effect].parameters:
+        if p.name in vals and not p.orientation and not p.contains(vals[p.name]):
+            return (f"not physical: {p.name} = {vals[p.name]:.4g} outside [{p.lower:g}, {p.upper:g}] "
+                    f"({p.bounds_reason})")
+    return ""
+
+
+def _crack_split(grid: ShootingGrid, fit: OutputErrorFit, effect: str) -> str:
+    """The crack's asymmetry on the low- and the high-amplitude half of the segments."""
+    amp = np.array([np.max(np.hypot(grid.y[i0:i1 + 1, 0], grid.y[i0:i1 + 1, 1])) for i0, i1 in grid.segments])
+    order = np.argsort(amp)
+    half = len(order) // 2
+    if half < 3:
+        return ""
+    coef_name = f"{effect}.{EFFECTS[effect].coefficients[0]}"
+    res = []
+    for part in (order[:half], order[half:]):
+        part = np.sort(part)
+        sub = replace(grid, segments=grid.segments[part])
+        start = {e: fit.theta_full[slice(*_slots(e))].copy() for e in fit.effects}
+        args = {e: {p.name: fit.value(f"{e}.{p.name}") for p in EFFECTS[e].argument_parameters}
+                for e in fit.effects if EFFECTS[e].argument_parameters}
+        try:
+            f = fit_output_error(sub, fit.effects, start, x0=fit.x0[part], fixed_args=args, max_iter=15)
+        except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+            return ""
+        i = f.names.index(coef_name)
+        res.append((f.values[i], math.sqrt(max(f.covariance[i, i], 0.0))))
+    (lo, se_lo), (hi, se_hi) = res
+    z = abs(hi - lo) / math.hypot(se_lo, se_hi) if (se_lo > 0 or se_hi > 0) else 0.0
+    if z > CRACK_SPLIT_Z and abs(hi - lo) > abs(hi + lo) / 6.0:
+        return (f"rule crack_amplitude_independence: its stiffness asymmetry is {lo:.3g} +- {1.96 * se_lo:.2g} "
+                f"on the low-amplitude half of the record and {hi:.3g} +- {1.96 * se_hi:.2g} on the high-amplitude "
+                f"half ({z:.1f} standard errors apart): a crack's asymmetry does not depend on the amplitude, a "
+                f"rub's contact does")
+    return ""
+
+
+def diagnose_output_error(
+    grid: ShootingGrid,
+    model: Sequence[str],
+    candidates: Sequence[str],
+    *,
+    alpha: float = 0.05,
+    unit_scale: float = 1.0,
+    unit: str = "",
+    progress: bool = False,
+) -> OutputErrorDiagnosis:
+    """Forward selection on the output error (module docstring)."""
+    t_start = time.perf_counter()
+    lib = library_effects()
+    notes = []
+    model = tuple(e for e in model if e in lib)
+    skipped = [c for c in candidates if c not in lib]
+    if skipped:
+        notes.append(f"not tried by the output-error fit (set-valued friction or a user effect): {', '.join(skipped)}")
+    cands = [c for c in dict.fromkeys(candidates) if c in lib and c not in model and c != "stiffness"]
+    if grid.noise_std is None or not grid.noise_std > 0:
+        raise ValueError("the output-error diagnosis needs the probes' noise level (grid.noise_std)")
+    floor = float(grid.noise_std)
+
+    def say(msg: str) -> None:
+        if progress:
+            print(f"[{time.perf_counter() - t_start:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+    start = equation_error_start(grid, model)
+    base = fit_output_error(grid, model, start)
+    say(f"starting model fitted: residual {base.rms / floor:.3g}x the noise floor")
+    current, cur_model, added = base, tuple(model), []
+    tried: list[Candidate] = []
+    crack_amp_cache: dict = {}
+    for rnd in range(1, MAX_ADDED + 1):
+        if current.rms / floor <= EXPLAINED_RATIO:
+            break
+        excess = max(current.rss - floor * floor * current.n_rows, 1e-300)
+        fits = {}
+        for c in cands:
+            if c in cur_model:
+                continue
+            f = _fit_candidate(grid, cur_model, c, current)
+            say(f"round {rnd}: {c} tried" + (f" (residual {f.rms / floor:.3g}x the floor)" if f else " (diverged)"))
+            if f is not None:
+                fits[c] = f
+        n = max(len(fits), 1)
+        round_rows = []
+        for c, f in fits.items():
+            _, _, lp = f.wald(c)
+            relevance = (current.rss - f.rss) / excess
+            reason = ""
+            if not lp < math.log10(alpha / n):
+                reason = f"not significant (log10 p = {lp:.3g}, Bonferroni level {math.log10(alpha / n):.3g})"
+            elif relevance < RELEVANT_SHARE:
+                reason = f"significant, not relevant: removes {100 * relevance:.1f} % of the residual above the floor"
+            else:
+                reason = _physical_problem(f, c)
+            row = Candidate(rnd, c, f.rms, lp, relevance, f.parameters(c), _intervals(f, c), not reason, reason)
+            round_rows.append(row)
+        # a crack must beat the rub and hold at every amplitude
+        accepted = sorted((r for r in round_rows if r.accepted), key=lambda r: fits[r.effect].rss)
+        chosen = None
+        for r in accepted:
+            if r.effect in CRACKS:
+                rub = fits.get("rub")
+                if rub is not None and rub.rss <= fits[r.effect].rss * 1.001:
+                    r.accepted, r.reason = False, ("rule crack_not_rub: the rub's own model explains the data at least "
+                                                   f"as well (residual {rub.rms / floor:.3g}x vs "
+                                                   f"{fits[r.effect].rms / floor:.3g}x the floor)")
+                    continue
+                key = (rnd, r.effect)
+                msg = crack_amp_cache.get(key)
+                if msg is None:
+                    msg = _crack_split(grid, fits[r.effect], r.effect)
+                    crack_amp_cache[key] = msg
+                if msg:
+                    r.accepted, r.reason = False, msg
+                    continue
+            chosen = r
+            break
+        for r in round_rows:
+            if chosen is not None and r is not chosen and r.accepted:
+                r.accepted, r.reason = False, f"a better candidate in this round: {chosen.effect}"
+        tried.extend(round_rows)
+        if chosen is None:
+            break
+        added.append(chosen.effect)
+        cur_model = (*cur_model, chosen.effect)
+        current = fits[chosen.effect]
+        say(f"round {rnd}: {chosen.effect} added: residual {current.rms / floor:.3g}x the noise floor")
+    return OutputErrorDiagnosis(tuple(model), cur_model, base, current, floor, tried, added, unit_scale, unit,
+                                time.perf_counter() - t_start, notes)
