@@ -4,13 +4,17 @@
    (:mod:`.from_vectors`): critical speeds in rpm, damping ratios, the natural frequency
    ``w_ref`` — and probe runout, which is then subtracted from the waveforms (unless the
    rig description asked for slow-roll compensation, done on loading).
-2. The waveforms are made dimensionless with ``t' = t w_ref``
-   (:meth:`~rotor_env.measurements.waveforms.RigRecord.to_measurements`) and diagnosed
-   like any record (:func:`.workflow.diagnose`): every library effect, the onset scan,
-   the checks and the verdict, with the rig's inertia ratio (``ip = 0`` for one plane).
-3. Results come back in engineering units: critical speeds (rpm), damping ratios, the
-   equation-error RMS as an equivalent static deflection in the rig's unit (the
-   dimensionless moment times the model's length unit), the unbalance response.
+2. The probes' noise is read off the band above the rotor's response (white noise: the
+   periodogram's level there, :func:`.output_error.noise_std_high_band`).
+3. The waveforms are made dimensionless with ``t' = t w_ref`` and diagnosed on the
+   **output error** (:mod:`.oe_diagnosis`): every candidate fitted to the measured
+   displacements, every decision (significance, relevance, the crack-vs-rub rules, the
+   verdict) on the measured-minus-predicted residual against the probes' own noise — not on
+   the equation error, whose second derivatives of noisy displacements are noise.
+4. One verdict for the record: the waveforms' (the full model of every sample); the 1X
+   vectors' verdict is shown under it as a part (criticals, damping, runout).
+   Results in engineering units: critical speeds (rpm), damping ratios, residual and noise
+   floor in the rig's unit (urad for a tilt rig), the unbalance response.
 """
 
 from __future__ import annotations
@@ -20,12 +24,15 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from ..measurements.rig import SPEED_UNITS
 from ..measurements.waveforms import LENGTH_UNIT, RigRecord
 from .from_vectors import VectorDiagnosis, _jsonable, diagnose_vectors
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES
+from .oe_diagnosis import OutputErrorDiagnosis, diagnose_output_error
+from .output_error import ShootingGrid, noise_std_high_band
 from .synchronous import RUNOUT
-from .workflow import diagnose
 
 __all__ = ["RigDiagnosis", "diagnose_rig"]
 
@@ -55,18 +62,23 @@ class RigDiagnosis:
 
     def to_dict(self) -> dict:
         d = dict(self.diagnosis.to_dict())
-        s = self.unit_scale
-        for key in ("rms_before", "rms_after", "noise_floor"):
-            if d.get(key) is not None:
-                d[f"{key}_dimensionless"] = d[key]
-                d[key] = d[key] * s
+        if not isinstance(self.diagnosis, OutputErrorDiagnosis):
+            s = self.unit_scale
+            for key in ("rms_before", "rms_after", "noise_floor"):
+                if d.get(key) is not None:
+                    d[f"{key}_dimensionless"] = d[key]
+                    d[key] = d[key] * s
         vd = self.vectors.to_dict()
         vd["unbalance"] = self.vectors.unbalance(self.record.rig.mass_kg)
         d.update({
             "kind": "rig",
             "rig": self.record.rig.source,
             "model_kind": self.record.rig.model,
-            "rms_unit": f"{self.rms_unit} (equation error as an equivalent static deflection)",
+            "rms_unit": (f"{self.rms_unit} (output error: measured minus predicted displacement, scaled to the "
+                         "probes' bandwidth; the floor is the probes' noise)"
+                         if isinstance(self.diagnosis, OutputErrorDiagnosis)
+                         else f"{self.rms_unit} (equation error as an equivalent static deflection)"),
+            "waveforms_verdict": d.get("verdict"),
             "criticals": vd["criticals"],
             "natural_frequency_rpm": self.w_ref / SPEED_UNITS["rpm"],
             "time_unit_s": 1.0 / self.w_ref,
@@ -100,12 +112,54 @@ class RigDiagnosis:
                 f"{self.record.rpm.min():.0f}&ndash;{self.record.rpm.max():.0f} rpm; the model's time unit "
                 f"1/{self.w_ref:.6g} s (natural frequency {self.w_ref / SPEED_UNITS['rpm']:.1f} rpm).</p>"
                 + self.vectors.html_section(level=3) + "<h2>Waveforms</h2>")
+        if isinstance(self.diagnosis, OutputErrorDiagnosis):
+            return self._oe_report(path, head, overwrite)
         if hasattr(self.diagnosis, "_verdict_html"):
             return self.diagnosis.report(path, overwrite=overwrite, preamble=head)
         return self.diagnosis.report(path, overwrite=overwrite)
 
+    def _figures(self) -> dict:
+        return self.diagnosis.figures(self.w_ref / SPEED_UNITS["rpm"], "speed [rpm]")
+
+    def _oe_report(self, path, head: str, overwrite: bool):
+        import base64
+        import html
+        import io
+
+        import matplotlib.pyplot as plt
+
+        from ..outputs import atomic_write_text
+
+        imgs = []
+        for name, fig in self._figures().items():
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+            plt.close(fig)
+            imgs.append(f"<figure><img alt='{html.escape(name)}' src='data:image/png;base64,"
+                        f"{base64.b64encode(buf.getvalue()).decode()}'/></figure>")
+        body = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>rotor-id rig diagnosis</title></head>"
+                f"<body><h1>Diagnosis: {html.escape(self.verdict)}</h1>{head}"
+                f"<pre>{html.escape(self.diagnosis.summary())}</pre>{''.join(imgs)}</body></html>")
+        return atomic_write_text(path, body, overwrite=overwrite)
+
     def save_figures(self, folder, *, overwrite: bool = True):
-        return self.diagnosis.save_figures(folder, overwrite=overwrite)
+        if not isinstance(self.diagnosis, OutputErrorDiagnosis):
+            return self.diagnosis.save_figures(folder, overwrite=overwrite)
+        from pathlib import Path
+
+        import matplotlib.pyplot as plt
+
+        from ..outputs import atomic_write
+
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        paths = []
+        for name, fig in self._figures().items():
+            paths.append(atomic_write(folder / f"{name}.png",
+                                      lambda p, fig=fig: fig.savefig(p, format="png", dpi=110, bbox_inches="tight"),
+                                      overwrite=overwrite))
+            plt.close(fig)
+        return paths
 
     @property
     def verdict(self) -> str:
@@ -139,14 +193,32 @@ def diagnose_rig(
             record = replace(record, notes=(*record.notes, f"runout seen in the 1X vectors, but the run has no "
                                                           f"slow roll below {below:.0f} rpm to take it from"))
     w_ref = vd.after.w_ref
-    meas = record.to_measurements(w_ref)
-    cands = [c for c in (candidates if candidates is not None else LIBRARY_CANDIDATES) if c not in model]
-    result = diagnose(meas, list(model), candidates=cands, ip=ip, alpha=alpha, progress=progress)
     if not math.isfinite(w_ref):  # pragma: no cover - fit_vectors returns finite values
         raise RuntimeError("no natural frequency identified")
-    if hasattr(result, "time_scale"):
-        # the figures in s and rpm: t_model = time_scale * t_file, the file's time in s
-        result.time_scale = float(result.time_scale) * w_ref
-        result.time_unit = "s"
-        result.amplitude_unit = "mm" if record.rig.model == "translation" else "rad"
+    cands = [c for c in (candidates if candidates is not None else LIBRARY_CANDIDATES) if c not in model]
+    grid, scale = waveform_grid(record, w_ref)
+    unit_scale = (LENGTH_UNIT / record.rig.to_metres(1.0)) if record.rig.model == "translation" else 1e6
+    unit = record.rig.amp_unit if record.rig.model == "translation" else "urad"
+    result = diagnose_output_error(grid, list(model), cands, alpha=alpha, unit_scale=unit_scale, unit=unit,
+                                   progress=progress)
     return RigDiagnosis(record, vd, result, w_ref)
+
+
+def waveform_grid(record: RigRecord, w_ref: float) -> tuple[ShootingGrid, float]:
+    """The record on the output-error grid (dimensionless: ``t' = t w_ref``, displacements in
+    :data:`LENGTH_UNIT` or rad) with the probes' noise read off the band above the response."""
+    scale = LENGTH_UNIT if record.rig.model == "translation" else 1.0
+    dt = float(np.median(np.diff(record.t)))
+    # the response holds the orders up to 3 of the top speed and the natural frequency
+    f_top = 4.0 * max(float(np.max(record.speed)), w_ref) / (2 * math.pi)
+    sigma = math.sqrt(0.5 * (noise_std_high_band(record.u, dt, f_top) ** 2
+                             + noise_std_high_band(record.v, dt, f_top) ** 2))
+    # the first and last revolution are left out (the keyphasor's speed is extrapolated there)
+    ph = record.phi
+    keep = (ph >= ph[0] + 2 * math.pi) & (ph <= ph[-1] - 2 * math.pi)
+    if keep.sum() < 100:
+        keep = np.ones_like(ph, dtype=bool)
+    t = (record.t[keep] - record.t[keep][0]) * w_ref
+    grid = ShootingGrid.from_arrays(t, ph[keep], record.speed[keep] / w_ref, record.v[keep] / scale,
+                                    record.u[keep] / scale, record.rig.ip, noise_std=max(sigma / scale, 1e-15))
+    return grid, scale

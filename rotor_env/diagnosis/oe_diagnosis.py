@@ -33,7 +33,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..effects import EFFECTS
-from .output_error import OutputErrorFit, ShootingGrid, equation_error_start, fit_output_error, library_effects
+from .output_error import (
+    OutputErrorFit,
+    ShootingGrid,
+    equation_error_start,
+    fit_output_error,
+    library_effects,
+)
 
 __all__ = ["OutputErrorDiagnosis", "diagnose_output_error"]
 
@@ -117,8 +123,14 @@ class OutputErrorDiagnosis:
             out[e] = {"values": self.after.parameters(e), "ci95": _intervals(self.after, e)}
         return out
 
+    def figures(self, speed_scale: float = 1.0, speed_unit: str = "speed (model units)") -> dict:
+        return {"output_error_residual": plot_residual(self, speed_scale, speed_unit),
+                "output_error_response": plot_response(self, speed_scale, speed_unit)}
+
     def to_dict(self) -> dict:
-        s = self.unit_scale
+        # residual and floor as the probes see them: the analysis band's RMS scaled to the
+        # probes' bandwidth (white noise), so that a model that explains the data reads ~1x
+        s = self.unit_scale * math.sqrt(self.before.grid.decimation)
         return {
             "method": "output error (multiple shooting, HAC)",
             "verdict": self.verdict,
@@ -143,7 +155,7 @@ class OutputErrorDiagnosis:
         }
 
     def summary(self) -> str:
-        s, u = self.unit_scale, self.unit
+        s, u = self.unit_scale * math.sqrt(self.before.grid.decimation), self.unit
         lines = [f"verdict: {self.verdict} (output error: residual {self.rms_ratio_after:.3g}x the probes' noise "
                  f"floor {self.noise_floor * s:.3g} {u}; starting model {self.rms_ratio_before:.3g}x)",
                  f"model: {', '.join(self.model_before)}"
@@ -366,8 +378,15 @@ def diagnose_output_error(
                 reason = _physical_problem(f, c)
             row = Candidate(rnd, c, f.rms, lp, relevance, f.parameters(c), _intervals(f, c), not reason, reason)
             round_rows.append(row)
+        # the best survivor by the Bayesian information criterion with the known noise level
+        # (rss / sigma^2 + free parameters * ln N): a breathing crack that fits no better
+        # than the open one it contains is not chosen over it
+        def bic(r):
+            f = fits[r.effect]
+            return f.rss / (floor * floor) + len(f.values) * math.log(f.n_rows)
+
         # a crack must beat the rub and hold at every amplitude
-        accepted = sorted((r for r in round_rows if r.accepted), key=lambda r: fits[r.effect].rss)
+        accepted = sorted((r for r in round_rows if r.accepted), key=bic)
         chosen = None
         for r in accepted:
             if r.effect in CRACKS:
@@ -399,3 +418,54 @@ def diagnose_output_error(
         say(f"round {rnd}: {chosen.effect} added: residual {current.rms / floor:.3g}x the noise floor")
     return OutputErrorDiagnosis(tuple(model), cur_model, base, current, floor, tried, added, unit_scale, unit,
                                 time.perf_counter() - t_start, notes)
+
+
+# ------------------------------------------------------------------ figures and report
+def _segment_speed_and_rms(fit: OutputErrorFit) -> tuple[np.ndarray, np.ndarray]:
+    g = fit.grid
+    speed = np.array([np.mean(g.phid[i0:i1 + 1]) for i0, i1 in g.segments])
+    rms = np.array([math.sqrt(np.mean(fit.residual[i0:i1 + 1] ** 2)) for i0, i1 in g.segments])
+    return speed, rms
+
+
+def plot_residual(diag: OutputErrorDiagnosis, speed_scale: float = 1.0, speed_unit: str = "speed (model units)"):
+    """Output-error residual RMS per segment against speed, before and after, with the
+    probes' noise floor: where the starting model fails, and that the added effects close it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 3.6))
+    s = diag.unit_scale * math.sqrt(diag.before.grid.decimation)
+    for fit, label, style in ((diag.before, "starting model", "-"), (diag.after, "final model", "-")):
+        sp, rms = _segment_speed_and_rms(fit)
+        ax.plot(sp * speed_scale, rms * s, style, label=label)
+    ax.axhline(diag.noise_floor * s, color="k", ls="--", lw=1, label="probes' noise floor")
+    ax.set_xlabel(speed_unit)
+    ax.set_ylabel(f"output-error RMS [{diag.unit or 'model units'}]")
+    ax.set_yscale("log")
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title("Where the model fails: measured minus predicted displacement")
+    fig.tight_layout()
+    return fig
+
+
+def plot_response(diag: OutputErrorDiagnosis, speed_scale: float = 1.0, speed_unit: str = "speed (model units)"):
+    """Measured and predicted orbit radius against speed (final model)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    g = diag.after.grid
+    s = diag.unit_scale
+    fig, ax = plt.subplots(figsize=(7.5, 3.6))
+    ax.plot(g.phid * speed_scale, np.hypot(g.y[:, 0], g.y[:, 1]) * s, ".", ms=1, alpha=0.4, label="measured")
+    pred = diag.after.prediction
+    ax.plot(g.phid * speed_scale, np.hypot(pred[:, 0], pred[:, 1]) * s, "-", lw=0.8, label="final model")
+    ax.set_xlabel(speed_unit)
+    ax.set_ylabel(f"orbit radius [{diag.unit or 'model units'}]")
+    ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    return fig

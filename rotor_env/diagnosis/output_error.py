@@ -571,7 +571,10 @@ def fit_output_error(
                 x0_new[s] += np.linalg.lstsq(Jx, rs - Jsg @ d, rcond=None)[0]
             st, p_new, j_new = _shoot(kernel, grid, x0_new, th_new, ar_new, active, pidx, qidx, qlo, qhi)
             r_new = grid.y - p_new
-            rss_new = float(np.sum(r_new * r_new)) if st == 0 else math.inf
+            with np.errstate(over="ignore", invalid="ignore"):  # a trial step that blew up is refused
+                rss_new = float(np.sum(r_new * r_new)) if st == 0 else math.inf
+            if not math.isfinite(rss_new):
+                rss_new = math.inf
             if rss_new < rss:
                 improved = True
                 drop = (rss - rss_new) / max(rss, 1e-300)
