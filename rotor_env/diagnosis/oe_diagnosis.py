@@ -381,7 +381,7 @@ def diagnose_output_error(
         # the best survivor by the Bayesian information criterion with the known noise level
         # (rss / sigma^2 + free parameters * ln N): a breathing crack that fits no better
         # than the open one it contains is not chosen over it
-        def bic(r):
+        def bic(r, fits=fits):
             f = fits[r.effect]
             return f.rss / (floor * floor) + len(f.values) * math.log(f.n_rows)
 
