@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
@@ -704,3 +705,8 @@ PHYSICAL_EFFECTS: tuple[str, ...] = (
     "structural_damping",
     "static_load",
 )
+
+#: The effects the package itself declares (all of them are registered above; effects
+#: registered later, by a user or a test, are not in it): the catalogue ``docs/EFFECTS.md``
+#: (:mod:`rotor_env.effects_doc`) renders these, and a plug-in may not take their names.
+PACKAGE_EFFECTS = MappingProxyType(dict(EFFECTS))

@@ -7,7 +7,7 @@ compares the committed file with :func:`effects_markdown`).  Regenerate it with:
     python -m rotor_env.effects_doc            # writes docs/EFFECTS.md
     python -m rotor_env.effects_doc OUT.md     # anywhere else
 
-Only the effects the package declares are listed (:data:`rotor_env.PACKAGE_EFFECTS`,
+Only the effects the package declares are listed (:data:`rotor_env.effects.PACKAGE_EFFECTS`,
 the registry as it stands right after ``import rotor_env``), not effects a user or a
 test registers later.  The physics behind them is in ``docs/PHYSICS.md``.
 """
@@ -128,9 +128,9 @@ def _effect_section(eff: Effect) -> str:
 
 
 def _package_effects() -> Mapping[str, Effect]:
-    import rotor_env
+    from .effects import PACKAGE_EFFECTS
 
-    return rotor_env.PACKAGE_EFFECTS
+    return PACKAGE_EFFECTS
 
 
 def effects_markdown(effects: Mapping[str, Effect] | None = None) -> str:

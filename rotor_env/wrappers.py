@@ -12,8 +12,8 @@ from numba import njit
 from scipy import special, stats
 
 from identifier import RecursiveQR
-from identifier._kernels import clean_factor, nested_energies, snapshot, update_blocks
-from identifier._special import fdtrc
+from identifier.kernels import clean_factor, nested_energies, snapshot, update_blocks
+from identifier.special import fdtrc
 
 from .regression import DEFAULT_EFFECTS, RegressionSpec, build_rows
 
@@ -289,7 +289,7 @@ def keep_moving_rows(data: np.ndarray, X: np.ndarray, y: np.ndarray, per: int, s
     the shaft, ``S > stick_speed`` (``S`` the relative speed, see :func:`_relative_speed`).
     The identification wrapper's step and the on-line monitor (:mod:`rotor_env.monitor`)
     both select their rows here, then update the factor with
-    :func:`identifier._kernels.update_blocks`: one core.
+    :func:`identifier.kernels.update_blocks`: one core.
     """
     k = 0
     for r in range(data.shape[0]):
@@ -322,7 +322,7 @@ def _write_features(R, col_sq, sums, masks, starts, ends, cfg, crit, ip, obs, ou
     (``d1 = -1``: none yet).  The flag is ``p < alpha`` on scipy's own ``fdtrc`` (exact for
     every alpha in (0, 1), where an inverse cdf at ``1 - alpha`` would round a tiny alpha
     away).  Not cached on disk: it calls scipy through a raw address
-    (:mod:`identifier._special`).
+    (:mod:`identifier.special`).
     """
     G, n = masks.shape
     scratch = np.empty(n + 4 * G)

@@ -22,7 +22,8 @@ from dataclasses import dataclass, replace
 
 from ..measurements.rig import SPEED_UNITS
 from ..measurements.waveforms import LENGTH_UNIT, RigRecord
-from .from_vectors import VectorDiagnosis, _jsonable, diagnose_vectors
+from ..results import jsonable
+from .from_vectors import VectorDiagnosis, diagnose_vectors
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES
 from .synchronous import RUNOUT
 from .workflow import diagnose
@@ -77,7 +78,7 @@ class RigDiagnosis:
         return d
 
     def to_json(self, **kwargs) -> str:
-        return json.dumps(_jsonable(self.to_dict()), **kwargs)
+        return json.dumps(jsonable(self.to_dict()), **kwargs)
 
     def summary(self) -> str:
         lines = [f"rig recording {self.record.source} ({self.record.rig.model}, "

@@ -61,7 +61,7 @@ class Model:
         return len(self.effects)
 
 
-def _as_model(model) -> Model:
+def as_model(model) -> Model:
     if model is None:
         return Model()
     if isinstance(model, Model):
@@ -154,7 +154,7 @@ def load_user_effect(spec: str) -> Effect:
     if obj is None:
         raise ValueError(f"--effect {spec}: module {mod_name!r} has no attribute {attr!r}")
     effect = obj if isinstance(obj, Effect) else effect_from_function(obj, attr)
-    from .. import PACKAGE_EFFECTS  # the library as the package ships it (import-time snapshot)
+    from ..effects import PACKAGE_EFFECTS  # the library as the package ships it
 
     if effect.name in PACKAGE_EFFECTS and PACKAGE_EFFECTS[effect.name] is not effect:
         # a plug-in must not silently replace a library effect: every later diagnosis in
@@ -165,7 +165,7 @@ def load_user_effect(spec: str) -> Effect:
     return register_effect(effect, replace=True)
 
 
-def _validate_columns(eff: Effect, data: np.ndarray, ip: float) -> None:
+def validate_columns(eff: Effect, data: np.ndarray, ip: float) -> None:
     args = (data[:, 1], data[:, 2], data[:, 3], data[:, 4], data[:, 5], data[:, 6], data[:, 7], ip)
     try:
         Xy, Xx = eff.regressors(*args)

@@ -13,7 +13,8 @@ import numpy as np
 
 from ..outputs import atomic_write, atomic_write_text, check_writable
 from . import field_plots as fp
-from .orders import _first_rows, autocorrelation, complex_rows, failing_windows, order_map
+from .orders import autocorrelation, complex_rows, failing_windows, first_rows, order_map
+from .verdict import VERDICT_TEXT
 
 
 @dataclass(frozen=True)
@@ -187,7 +188,7 @@ class DiagnosisFigures:
         if which == "before":
             windows = self.windows
         else:  # where the final model still fails (against the same floor)
-            windows, _ = failing_windows(m.t, _first_rows(comp.residual, self.equation), floor=self.noise_floor)
+            windows, _ = failing_windows(m.t, first_rows(comp.residual, self.equation), floor=self.noise_floor)
         for w in windows:
             ax.axvspan(w["t_start"] * u.time_factor, w["t_end"] * u.time_factor, color="orange", alpha=0.2)
         ax.axhline(2 * self.noise_floor, color="k", lw=0.5, ls=":")
@@ -268,7 +269,7 @@ class DiagnosisFigures:
         """Residual autocorrelation with 95 % bounds for white noise."""
         fig, ax = self._ax(ax)
         comp = self.before if which == "before" else self.after
-        r = _first_rows(comp.residual, self.equation)
+        r = first_rows(comp.residual, self.equation)
         ac = autocorrelation(r, max_lag)
         dt = self.data.meas.dt
         u = self.plot_units()
@@ -333,8 +334,8 @@ class DiagnosisFigures:
         u = self.plot_units()
         m = self.data.meas
         t = u.time(m.t)
-        r0 = _first_rows(self.before.residual, self.equation)
-        r1 = _first_rows(self.after.residual, self.equation)
+        r0 = first_rows(self.before.residual, self.equation)
+        r1 = first_rows(self.after.residual, self.equation)
         ax.plot(t, r0, lw=0.3, color="C3", label=f"starting model (RMS {self.before.rms:.3g})")
         ax.plot(t, r1, lw=0.3, color="C0", label=f"final model (RMS {self.after.rms:.3g})")
         ax.axhspan(-2 * self.noise_floor, 2 * self.noise_floor, color="0.5", alpha=0.25,
@@ -529,8 +530,6 @@ class DiagnosisFigures:
 
         Every string from data or user input (effect names, rules, notes) is escaped.
         """
-        from .result import VERDICT_TEXT  # result imports this module
-
         verdict = str(self.verdict)
         template = VERDICT_TEXT.get(verdict)
         sentence = template.format(ratio=self.rms_ratio_after, floor=self.noise_floor) if template else ""

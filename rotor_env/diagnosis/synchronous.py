@@ -253,7 +253,7 @@ class VectorFit:
 
 
 # ----------------------------------------------------------------- predictions
-def _probe_matrix(table: VectorTable) -> np.ndarray:
+def vector_probe_matrix(table: VectorTable) -> np.ndarray:
     """(probes, 2) weights of (Q_u, Q_v) in each probe's vector."""
     if table.angles is None:
         # no geometry: one probe (or several, each seen as the u direction)
@@ -392,7 +392,7 @@ class _Problem:
         self.model, self.table = model, table
         self.Y = table.vectors[1]
         self.valid = np.isfinite(self.Y)
-        self.P = _probe_matrix(table)
+        self.P = vector_probe_matrix(table)
         self.method = method
         #: w_ref -> the transient runs' grid at that time scale (the Jacobian's columns share it)
         self._profiles: dict[float, _Profile] = {}
@@ -691,7 +691,7 @@ def _eigen(model: SynchronousModel, coef: np.ndarray, W: float) -> tuple[np.ndar
     return lam, np.abs(vec[0] + 1j * vec[1]), np.abs(vec[0] - 1j * vec[1])
 
 
-def _modes(model: SynchronousModel, coef: np.ndarray, W: float) -> tuple[np.ndarray, np.ndarray]:
+def whirl_modes(model: SynchronousModel, coef: np.ndarray, W: float) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues with positive imaginary part and each one's forward share."""
     lam, fwd, bwd = _eigen(model, coef, W)
     keep = lam.imag > 1e-9
@@ -736,7 +736,7 @@ def critical_speeds(model: SynchronousModel, coef: np.ndarray, w_ref: float, spe
     n_branch = None
     vals = []
     for w in grid:
-        lam, _ = _modes(model, coef, w)
+        lam, _ = whirl_modes(model, coef, w)
         if n_branch is None:
             n_branch = len(lam)
         vals.append(lam.imag if len(lam) == n_branch else np.full(n_branch, np.nan))
@@ -745,13 +745,13 @@ def critical_speeds(model: SynchronousModel, coef: np.ndarray, w_ref: float, spe
         f = vals[:, b]
         for k in np.nonzero(np.sign(f[:-1]) * np.sign(f[1:]) < 0)[0]:
             def g(w, b=b):
-                lam, _ = _modes(model, coef, w)
+                lam, _ = whirl_modes(model, coef, w)
                 return lam.imag[b] - w
             try:
                 wc = brentq(g, grid[k], grid[k + 1], xtol=1e-12)
             except ValueError:
                 continue
-            lam, share = _modes(model, coef, wc)
+            lam, share = whirl_modes(model, coef, wc)
             if share[b] < min_forward_share or not (lo * 0.999 <= wc <= hi * 1.001):
                 continue
             out.append({"rpm": wc * w_ref / SPEED_UNITS["rpm"],
