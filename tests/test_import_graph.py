@@ -231,8 +231,6 @@ def test_no_import_cycles():
 #: Arrows still pointing up, each removed by the step of issue 23 that moves its code.
 KNOWN_UPWARD = {
     "rotor_env.measurements.simulated -> rotor_env.simulator",  # rig simulation beside the simulator
-    "rotor_env.monitor.core -> rotor_env.wrappers",  # the online engine out of the wrapper
-    "rotor_env.monitor.kernel -> rotor_env.wrappers",
 }
 
 
