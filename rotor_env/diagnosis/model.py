@@ -2,32 +2,26 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..effects import Effect, Parameter, get_effect, register_effect
+from ..effects import (
+    DerivedNames,
+    Effect,
+    Parameter,
+    candidate_effects,
+    get_effect,
+    register_effect,
+)
 
 DEFAULT_MODEL: tuple[str, ...] = ("unbalance", "viscous_damping")
-#: candidates by default: every physical library effect (the paper's in-phase unbalance is a
-#: preset variant of ``unbalance``, not a separate candidate)
-LIBRARY_CANDIDATES: tuple[str, ...] = (
-    "unbalance",
-    "viscous_damping",
-    "asymmetry",
-    "nonlinear_stiffness",
-    "structural_damping",
-    "stiffness",
-    "static_load",
-    "shaft_bow",
-    "support_anisotropy",
-    "cross_coupled_stiffness",
-    "misalignment",
-    "breathing_crack",
-    "rub",
-)
+#: candidates by default: every library effect declared ``candidate=True``, read from the
+#: registry when used (the paper's in-phase unbalance is a preset variant of ``unbalance``,
+#: not a separate candidate)
+LIBRARY_CANDIDATES: Sequence[str] = DerivedNames(candidate_effects)
 
 
 # ------------------------------------------------------------------ the model

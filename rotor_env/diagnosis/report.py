@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..effects import whirl_effects
 from ..outputs import atomic_write, atomic_write_text, check_writable
 from . import field_plots as fp
 from .orders import autocorrelation, complex_rows, failing_windows, first_rows, order_map
@@ -450,8 +451,7 @@ class DiagnosisFigures:
         fig = fp.plot_campbell(u.speed(speed), {k: u.frequency(w) for k, w in branches.items()},
                                measured_peaks=(u.speed(ps), u.frequency(pw)) if len(ps) else None,
                                speed_unit=u.speed_unit, ax=ax)
-        covered = [e for e in ("viscous_damping", "stiffness", "support_anisotropy", "cross_coupled_stiffness")
-                   if e in self.model]
+        covered = [e for e in whirl_effects() if e in self.model]
         _first_axes(fig, ax).set_title(
             "Campbell diagram of the final model (linear fixed-frame part: ip"
             + (", " + ", ".join(covered) if covered else "") + ")", fontsize=9)

@@ -54,7 +54,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq, least_squares
 
-from ..effects import EFFECTS, get_effect
+from ..effects import EFFECTS, DerivedNames, get_effect, synchronous_effects
 from ..measurements.vectors import SPEED_UNITS, OrderTracker, VectorTable
 from ..simulator import call_integrate_profile, compile_accel, smooth_effects
 
@@ -74,10 +74,9 @@ RUNOUT = "runout"
 #: a second mode of the rotor-bearing system in the speed range (another critical speed):
 #: an isotropic oscillator of its own natural frequency, damping and modal unbalance
 SECOND_MODE = "second_mode"
-#: effects that show in 1X data and that the synchronous model can carry
-VECTOR_EFFECTS: tuple[str, ...] = (
-    "viscous_damping", "unbalance", "shaft_bow", "support_anisotropy", "cross_coupled_stiffness",
-)
+#: effects that show in 1X data and that the synchronous model can carry: those declared
+#: ``synchronous=True`` (:attr:`rotor_env.effects.Effect.synchronous`), read from the registry
+VECTOR_EFFECTS: Sequence[str] = DerivedNames(synchronous_effects)
 #: quasi-steady is used only where it is within this fraction of the peak of the transient
 QUASI_STEADY_TOL = 0.01
 #: the record starts this many revolutions before the first row (initial transient settles)
