@@ -204,7 +204,7 @@ def train_rllib(
     stops (to save RLlib's own checkpoint, say, or inspect it)."""
     import ray
 
-    from .evaluation import run_episode, statistics, versions
+    from .episodes import run_episode, statistics, versions
 
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")

@@ -45,7 +45,7 @@ def make_fleet(folder: Path, n: int) -> None:
 
 def sequential(folder: str, out: str) -> None:
     """The plain loop (run in its own process by the benchmark)."""
-    from rotor_env.cli import diagnose_file
+    from rotor_env.batch import diagnose_file
 
     rows = {}
     for f in sorted(Path(folder).glob("*.csv")):

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _kernels as K
+from . import kernels as K
 from .significance import (
     InformationCriteria,
     SignificanceTable,

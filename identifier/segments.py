@@ -17,7 +17,7 @@ a column of a factor zeroes it in the rows behind it (the factor's columns are
     [ R_suf(c) with columns `after` zeroed  ] .
 
 One pass forward and one backward give every prefix and suffix factor
-(:func:`identifier._kernels.prefix_factors`), and one batched QR the energy at every
+(:func:`identifier.kernels.prefix_factors`), and one batched QR the energy at every
 cut: ``O(m p^2)`` for the data once and ``O(p^3)`` per cut, against ``O(m p^2)`` per cut
 for a refit.  A finer scan between two cuts of a coarse one reuses the coarse scan's
 factors at those cuts, so it only passes over the rows between them
@@ -33,7 +33,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from . import _kernels as K
+from . import kernels as K
 
 
 class SplitScan:
@@ -92,7 +92,7 @@ class SplitScan:
         J = split[:, -1, -1] ** 2
         # a column absent on both sides of a cut, or in the span of the columns before it,
         # leaves its pivot row out of the elimination: drop it as the estimator does
-        # (:func:`identifier._kernels.clean_factor`, the same ``rtol``)
+        # (:func:`identifier.kernels.clean_factor`, the same ``rtol``)
         col_sq = np.einsum("kij,kij->kj", M[:, :, :-1], M[:, :, :-1])
         keep = np.empty(p - 1, dtype=np.bool_)
         work, row = np.empty((p, p)), np.empty(p)

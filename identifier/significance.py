@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special
 
-from ._kernels import betainc_cf
+from .kernels import betainc_cf
 
 __all__ = [
     "InformationCriteria",

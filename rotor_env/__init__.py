@@ -6,10 +6,8 @@
 5001
 """
 
-from types import MappingProxyType
-
 from .diagnosis import Diagnosis, Model, diagnose, fit
-from .effects import EFFECTS, Effect, Parameter, get_effect, register_effect
+from .effects import EFFECTS, PACKAGE_EFFECTS, Effect, Parameter, get_effect, register_effect
 from .io import MeasurementError, load_measurements
 from .measurements import COLUMNS, Measurements
 from .params import Crack, RotorParams
@@ -21,6 +19,7 @@ __all__ = [
     "COLUMNS",
     "EFFECTS",
     "ENV_IDS",
+    "PACKAGE_EFFECTS",
     "Crack",
     "Diagnosis",
     "Effect",
@@ -45,11 +44,6 @@ __all__ = [
     "register_effect",
     "simulate",
 ]
-
-#: The effects the package itself declares, as registered once ``import rotor_env`` has
-#: run (effects registered later, by a user or a test, are not in it): the catalogue
-#: ``docs/EFFECTS.md`` (:mod:`rotor_env.effects_doc`) renders these.
-PACKAGE_EFFECTS = MappingProxyType(dict(EFFECTS))
 
 #: Gymnasium ids registered on import.
 ENV_IDS: tuple[str, ...] = ("rotor_env/RotorRunUp-v0", "rotor_env/RotorBalancing-v0")

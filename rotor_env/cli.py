@@ -7,6 +7,8 @@ import math
 import sys
 from collections.abc import Sequence
 
+from .batch import diagnose_file, inertia_ratio, model_list
+
 
 def _cmd_identifier_demo(args: argparse.Namespace) -> int:
     from identifier import demo
@@ -35,14 +37,11 @@ def _parse_number(text: str, what: str) -> float:
 
 
 def _ip_value(text: str) -> float:
-    """``--ip``: a number in [0, 1) (argparse reports a bad one as a usage error)."""
+    """``--ip`` for argparse (a bad value is reported as a usage error)."""
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (math.isfinite(value) and 0 <= value < 1):
-        raise argparse.ArgumentTypeError(f"{text!r}: the inertia ratio I_p/I_t must be a number in [0, 1)")
-    return value
+        return inertia_ratio(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _parse_set(items: Sequence[str]) -> dict[str, float]:
@@ -253,19 +252,6 @@ def _add_paper_parser(sub) -> None:
 
 
 # ---------------------------------------------------------------------- diagnose / fit
-def _model_list(text: str | None, default: Sequence[str]) -> list[str]:
-    if text is None:
-        return list(default)
-    names = [m.strip() for m in text.split(",") if m.strip()]
-    if not names:
-        raise _UsageError("--model needs at least one effect name")
-    from .effects import get_effect
-
-    for n in names:
-        get_effect(n)
-    return names
-
-
 def _load(args):
     from .diagnosis import load_user_effect
     from .io import load_measurements
@@ -300,7 +286,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         result = _diagnose_measured(args)
     else:
         meas, user = _load(args)
-        model = _model_list(args.model, DEFAULT_MODEL)
+        model = model_list(args.model, DEFAULT_MODEL)
         candidates = [c for c in (*LIBRARY_CANDIDATES, *user) if c not in model]
         result = diagnose(meas, model, candidates=candidates, ip=args.ip, alpha=args.alpha, slow_roll=args.slow_roll,
                           progress=sys.stderr.isatty() and not args.json)
@@ -326,48 +312,6 @@ def _diagnose_measured(args: argparse.Namespace):
     return diagnose_file(args.file, model=args.model, ip=args.ip, alpha=args.alpha, vectors=args.vectors,
                          rig=args.rig, amp_unit=args.amp_unit, phase=args.phase,
                          progress=sys.stderr.isatty() and not args.json)
-
-
-def diagnose_file(file, *, model: str | None = None, ip: float | None = None, alpha: float = 0.05,
-                  slow_roll: float | None = None, vectors: bool = False, rig=None, amp_unit: str = "um",
-                  phase: str = "lag", progress: bool = False):
-    """Diagnose one file as ``rotor-id diagnose`` does (shared by ``diagnose`` and ``batch``).
-
-    ``model``: the comma-separated ``--model`` text (None: the default model of the kind of
-    file).  A dimensionless measurement file unless ``vectors`` (an order-tracked table)
-    or ``rig`` (a rig file path or a loaded :class:`~rotor_env.measurements.rig.Rig`:
-    raw waveforms, or the table's probes with ``vectors``).
-    """
-    from .diagnosis.from_rig import diagnose_rig
-    from .diagnosis.from_vectors import VECTOR_CANDIDATES, VECTOR_MODEL, diagnose_vectors
-    from .diagnosis.model import DEFAULT_MODEL
-    from .measurements.rig import load_rig
-    from .measurements.vectors import load_vector_table
-    from .measurements.waveforms import load_waveforms
-
-    if isinstance(rig, (str, bytes)) or hasattr(rig, "__fspath__"):
-        rig = load_rig(rig)
-    if not vectors and rig is None:
-        from .diagnosis import LIBRARY_CANDIDATES, diagnose
-        from .io import load_measurements
-
-        meas = load_measurements(file)
-        names = _model_list(model, DEFAULT_MODEL)
-        return diagnose(meas, names, candidates=[c for c in LIBRARY_CANDIDATES if c not in names], ip=ip,
-                        alpha=alpha, slow_roll=slow_roll, progress=progress)
-    if vectors:
-        # one plane: the probes see one orbit from their angles; probes in several planes see
-        # different amplitudes of the mode: each is then fitted on its own (no common geometry)
-        angles = ({p.name: math.degrees(p.angle) for p in rig.probes}
-                  if rig is not None and len(rig.plane_names) == 1 else None)
-        table = load_vector_table(file, amp_unit=amp_unit, phase=phase, angles=angles)
-        names = _model_list(model, VECTOR_MODEL) if model else list(VECTOR_MODEL)
-        ip = rig.ip if rig is not None else (ip if ip is not None else 0.0)
-        return diagnose_vectors(table, ip=ip, model=names, alpha=alpha, phase=phase,
-                                candidates=[c for c in VECTOR_CANDIDATES if c not in names])
-    record = load_waveforms(file, rig)
-    names = _model_list(model, DEFAULT_MODEL)
-    return diagnose_rig(record, names, alpha=alpha, progress=progress)
 
 
 def _simulate_rig(args: argparse.Namespace, values: dict, ip: float, crack, out) -> int:
@@ -450,11 +394,11 @@ def _fit(args: argparse.Namespace) -> int:
     import json
 
     from .diagnosis import fit
-    from .diagnosis.result import _jsonable
     from .regression import RegressionSpec
+    from .results import jsonable
 
     meas, _ = _load(args)
-    model = _model_list(args.model, ())
+    model = model_list(args.model, ())
     RegressionSpec(effects=tuple(model))  # refuses a model that cannot be fitted (two effects, one tau)
     comp = fit(meas, model, ip=args.ip)
     _check_finite_fit(comp, args.file)
@@ -474,7 +418,7 @@ def _fit(args: argparse.Namespace) -> int:
                                      dict(zip(comp.columns, map(float, comp.eiv_bias), strict=True))),
     }
     if args.json:
-        print(json.dumps(_jsonable(out)))
+        print(json.dumps(jsonable(out)))
         return 0
     print(f"model: {', '.join(comp.model)}")
     print(f"equation error RMS {comp.rms:.4g}, R^2 {comp.r2:.5f}; free-run fit {comp.fit_percent:.1f} %")

@@ -28,18 +28,25 @@ floats and on numpy arrays alike and be compilable by numba (plain arithmetic,
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
 __all__ = [
     "EFFECTS",
     "FRICTION_EPS",
+    "DerivedMapping",
+    "DerivedNames",
     "Effect",
     "Parameter",
+    "candidate_effects",
+    "fault_ranges",
     "get_effect",
     "register_effect",
+    "synchronous_effects",
+    "whirl_effects",
 ]
 
 #: Regularisation of the relative speed in the dry-friction *regressor*:
@@ -132,6 +139,17 @@ class Effect:
     caveat: a lookalike the data cannot tell apart from it (reported when it is added).
     lookalikes: library effects with a similar signature; when one of them is added the
         diagnosis reports the evidence that decided between them.
+    candidate: the diagnosis tests it by default when the model lacks it
+        (:func:`candidate_effects`, the diagnosis's ``LIBRARY_CANDIDATES``).
+    fault_range: ``((parameter, low, high), ...)``: the environments can draw it as a
+        field fault, each parameter ``U(low, high)`` (:func:`fault_ranges`); ``()``: they do not.
+    synchronous: its moment is linear in the state or independent of it, so the 1X
+        (synchronous) vector model can carry it (:func:`synchronous_effects`).
+    whirl: a linear fixed-frame effect with constant coefficients, part of the whirl
+        (Campbell) model of the final diagnosis (:func:`whirl_effects`).
+
+    These four fields are the only lists of effects: every list of the package is
+    derived from them, so that adding an effect is one :func:`register_effect`.
     """
 
     name: str
@@ -149,6 +167,14 @@ class Effect:
     caveat: str = ""
     #: library effects that look like it (the diagnosis reports what told them apart)
     lookalikes: tuple[str, ...] = ()
+    #: tested by the diagnosis by default (a plug-in is tested where it is named)
+    candidate: bool = False
+    #: the environments' field-fault draw: (parameter, low, high) per parameter, uniform
+    fault_range: tuple[tuple[str, float, float], ...] = ()
+    #: carried by the 1X (synchronous) vector model
+    synchronous: bool = False
+    #: part of the linear fixed-frame whirl (Campbell) model
+    whirl: bool = False
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -386,6 +412,10 @@ def register_effect(effect: Effect, *, replace: bool = False) -> Effect:
         if not (0.0 < p.lower < p.upper < math.inf and p.scan_points >= 2):
             raise ValueError(f"effect {effect.name!r}: the scanned parameter {p.name!r} needs finite bounds "
                              f"0 < lower < upper (a geometric grid) and at least 2 scan points")
+    for name, low, high in effect.fault_range:
+        if name not in effect.parameter_names or not (math.isfinite(low) and math.isfinite(high) and low <= high):
+            raise ValueError(f"effect {effect.name!r}: fault_range entry {(name, low, high)!r} needs one of its "
+                             f"parameters {list(effect.parameter_names)} and finite bounds low <= high")
     for other in EFFECTS.values():
         if other.name == effect.name:
             continue
@@ -396,6 +426,71 @@ def register_effect(effect: Effect, *, replace: bool = False) -> Effect:
             )
     EFFECTS[effect.name] = effect
     return effect
+
+
+class DerivedNames(Sequence):
+    """A tuple of effect names derived from the registry when read (never a stale copy):
+    an effect registered later is in it.  Compares equal to the tuple it reads as."""
+
+    def __init__(self, derive: Callable[[], tuple[str, ...]]) -> None:
+        self._derive = derive
+
+    def __getitem__(self, i):
+        return self._derive()[i]
+
+    def __len__(self) -> int:
+        return len(self._derive())
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._derive())
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Sequence) and tuple(self) == tuple(other)
+
+    def __hash__(self) -> int:
+        return hash(tuple(self))
+
+    def __repr__(self) -> str:
+        return repr(self._derive())
+
+
+class DerivedMapping(Mapping):
+    """A read-only mapping derived from the registry when read (see :class:`DerivedNames`)."""
+
+    def __init__(self, derive: Callable[[], Mapping]) -> None:
+        self._derive = derive
+
+    def __getitem__(self, key):
+        return self._derive()[key]
+
+    def __len__(self) -> int:
+        return len(self._derive())
+
+    def __iter__(self) -> Iterator:
+        return iter(self._derive())
+
+    def __repr__(self) -> str:
+        return repr(dict(self._derive()))
+
+
+def candidate_effects() -> tuple[str, ...]:
+    """The effects the diagnosis tests by default, in registration order."""
+    return tuple(e.name for e in EFFECTS.values() if e.candidate)
+
+
+def fault_ranges() -> dict[str, tuple[tuple[str, float, float], ...]]:
+    """Effect -> its field-fault ranges, for the effects the environments can draw (registration order)."""
+    return {e.name: e.fault_range for e in EFFECTS.values() if e.fault_range}
+
+
+def synchronous_effects() -> tuple[str, ...]:
+    """The effects the 1X vector model can carry, in registration order."""
+    return tuple(e.name for e in EFFECTS.values() if e.synchronous)
+
+
+def whirl_effects() -> tuple[str, ...]:
+    """The linear fixed-frame effects of the whirl (Campbell) model, in registration order."""
+    return tuple(e.name for e in EFFECTS.values() if e.whirl)
 
 
 # unbalance_in_phase is the paper's one-column view of the same physical unbalance
@@ -428,6 +523,9 @@ register_effect(
         signature="limits the resonance peak; residual at the whirl (1x near the critical speed)",
         orders=(1,),
         lookalikes=('cross_coupled_stiffness',),
+        candidate=True,
+        synchronous=True,
+        whirl=True,
     )
 )
 register_effect(
@@ -448,6 +546,8 @@ register_effect(
         signature="synchronous (1x) forcing growing with speed squared",
         orders=(1,),
         lookalikes=('shaft_bow',),
+        candidate=True,
+        synchronous=True,
     )
 )
 _to, _from = _identity(("D",))
@@ -469,6 +569,7 @@ register_effect(
         "signature); synchronous response stays 1x",
         orders=(1, 2),
         lookalikes=('breathing_crack', 'misalignment', 'support_anisotropy'),
+        candidate=True,
     )
 )
 #: quadratic stiffness: at |theta| = 0.3 the quadratic moment stays below a third of the linear one
@@ -494,6 +595,7 @@ register_effect(
         signature="0x (a static offset) and 2x in the fixed frame, growing with amplitude squared",
         orders=(0, 2),
         lookalikes=('stiffness', 'misalignment', 'rub'),
+        candidate=True,
     )
 )
 _to, _from = _identity(("h",))
@@ -514,6 +616,7 @@ register_effect(
         "at the natural frequency that persists (non-synchronous, not a rotation order)",
         orders=(),
         dry_friction=True,
+        candidate=True,
     )
 )
 _to, _from = _identity(("k",))
@@ -532,6 +635,8 @@ register_effect(
         signature="sets the critical speed sqrt(k); a wrong k leaves residual at the whirl",
         orders=(1,),
         lookalikes=('nonlinear_stiffness', 'support_anisotropy', 'rub'),
+        candidate=True,
+        whirl=True,
     )
 )
 _to, _from = _identity(("tau",))
@@ -568,6 +673,7 @@ register_effect(
         cause="a constant side load: gravity on a horizontal shaft, bearing misalignment, a magnetic pull",
         signature="a static deflection: 0x in the fixed frame (with asymmetry, the crack's 2x)",
         orders=(0,),
+        candidate=True,
     )
 )
 
@@ -596,6 +702,9 @@ register_effect(
         "equations: one probe plane cannot tell it from a bow; if the 1x at slow roll is runout, subtract it "
         "(diagnose --slow-roll SPEED) and diagnose again, or compare with a second probe plane",
         lookalikes=('unbalance',),
+        candidate=True,
+        fault_range=(("bow", 0.002, 0.01), ("bow_phase", -math.pi, math.pi)),
+        synchronous=True,
     )
 )
 _to, _from = _identity(("support_anisotropy",))
@@ -619,6 +728,10 @@ register_effect(
         "and shows 2x with a side load)",
         orders=(-1,),
         lookalikes=('asymmetry',),
+        candidate=True,
+        fault_range=(("support_anisotropy", -0.08, 0.08),),
+        synchronous=True,
+        whirl=True,
     )
 )
 _to, _from = _identity(("cross_coupling",))
@@ -640,6 +753,11 @@ register_effect(
         "frequency), so it is not tied to a rotation order",
         orders=(),
         lookalikes=('viscous_damping',),
+        # the environments' range stays below the damping: the rotor stays stable
+        candidate=True,
+        fault_range=(("cross_coupling", 0.0, 0.01),),
+        synchronous=True,
+        whirl=True,
     )
 )
 register_effect(
@@ -666,6 +784,8 @@ register_effect(
         "A crack's 2x needs a side load and grows with the static deflection",
         orders=(2, -2),
         lookalikes=('asymmetry', 'breathing_crack', 'nonlinear_stiffness'),
+        candidate=True,
+        fault_range=(("misalignment", 0.0, 0.005), ("misalignment_phase", -math.pi, math.pi)),
     )
 )
 register_effect(
@@ -693,6 +813,9 @@ register_effect(
         "2x and 3x peaks); the always-open asymmetry has the 2x only",
         orders=(1, 2, 3),
         lookalikes=('asymmetry', 'misalignment'),
+        candidate=True,
+        fault_range=(("dk_crack", 0.02, 0.1), ("breathing_depth", 0.5, 1.0),
+                     ("breathing_phase", -math.pi, math.pi)),
     )
 )
 
@@ -730,6 +853,9 @@ register_effect(
         "the whole record is a stiffness change plus a cross-coupling to these data, so a rub is named only "
         "where the contact comes and goes",
         lookalikes=("stiffness", "nonlinear_stiffness"),
+        # the environments' clearances lie inside their casing's 0.6: touched before an episode ends on "rub"
+        candidate=True,
+        fault_range=(("rub_stiffness", 0.2, 1.0), ("rub_friction", 0.1, 0.3), ("rub_clearance", 0.1, 0.4)),
     )
 )
 
@@ -744,3 +870,8 @@ PHYSICAL_EFFECTS: tuple[str, ...] = (
     "structural_damping",
     "static_load",
 )
+
+#: The effects the package itself declares (all of them are registered above; effects
+#: registered later, by a user or a test, are not in it): the catalogue ``docs/EFFECTS.md``
+#: (:mod:`rotor_env.effects_doc`) renders these, and a plug-in may not take their names.
+PACKAGE_EFFECTS = MappingProxyType(dict(EFFECTS))

@@ -7,7 +7,7 @@ compares the committed file with :func:`effects_markdown`).  Regenerate it with:
     python -m rotor_env.effects_doc            # writes docs/EFFECTS.md
     python -m rotor_env.effects_doc OUT.md     # anywhere else
 
-Only the effects the package declares are listed (:data:`rotor_env.PACKAGE_EFFECTS`,
+Only the effects the package declares are listed (:data:`rotor_env.effects.PACKAGE_EFFECTS`,
 the registry as it stands right after ``import rotor_env``), not effects a user or a
 test registers later.  The physics behind them is in ``docs/PHYSICS.md``.
 """
@@ -51,6 +51,10 @@ How to read an entry:
   which a model that lacks the effect leaves residual energy (0: static; a negative order
   is a backward whirl of `z = th_y + i th_x`, PHYSICS.md section 1.2). The diagnosis checks
   that adding the effect removes energy there (PHYSICS.md, section 7).
+- **Used by**: what the declaration's fields put it in: the diagnosis's default candidates
+  (`candidate`), the 1X vector model (`synchronous`), the whirl (Campbell) model (`whirl`),
+  the environments' field faults with the ranges they draw from (`fault_range`). Every such
+  list in the package is derived from these fields.
 - **Parameters**: *default* is the paper's Table 1 value; a physical rotor lies in the
   *plausible range* (the diagnosis rejects a candidate identified outside it, for the reason
   given); the equations are defined on the *domain* (parameter values outside it are refused).
@@ -101,6 +105,22 @@ def _parameter_row(p: Parameter) -> str:
     )
 
 
+def _uses(eff: Effect) -> list[str]:
+    """Where the declaration's flags put the effect (its ``candidate``, ``synchronous``,
+    ``whirl`` and ``fault_range`` fields)."""
+    uses = []
+    if eff.candidate:
+        uses.append("the diagnosis (a default candidate)")
+    if eff.synchronous:
+        uses.append("the 1X vector model")
+    if eff.whirl:
+        uses.append("the whirl (Campbell) model")
+    if eff.fault_range:
+        ranges = ", ".join(f"`{n}` U({_number(lo)}, {_number(hi)})" for n, lo, hi in eff.fault_range)
+        uses.append(f"the environments' field faults ({ranges})")
+    return uses
+
+
 def _effect_section(eff: Effect) -> str:
     moment = eff.moment.replace("`", "'")
     lines = [
@@ -112,6 +132,9 @@ def _effect_section(eff: Effect) -> str:
         f"- **Rotation orders:** {_orders(eff.orders)}",
         f"- **Regression coefficients:** {', '.join(f'`{c}`' for c in eff.coefficients)}",
     ]
+    uses = _uses(eff)
+    if uses:
+        lines.append(f"- **Used by:** {'; '.join(uses)}")
     if eff.dry_friction:
         lines.append(
             "- **Set-valued (dry friction):** yes; the simulator integrates it with a stick/slip "
@@ -128,9 +151,9 @@ def _effect_section(eff: Effect) -> str:
 
 
 def _package_effects() -> Mapping[str, Effect]:
-    import rotor_env
+    from .effects import PACKAGE_EFFECTS
 
-    return rotor_env.PACKAGE_EFFECTS
+    return PACKAGE_EFFECTS
 
 
 def effects_markdown(effects: Mapping[str, Effect] | None = None) -> str:

@@ -2,7 +2,7 @@
 
 Every recording (a file of a folder or a glob, or one recording of a Parquet dataset
 with a recording id column) is diagnosed exactly as ``rotor-id diagnose`` would
-(:func:`rotor_env.cli.diagnose_file`), as one task of a Ray Data ``map`` over the
+(:func:`rotor_env.batch.diagnose_file`), as one task of a Ray Data ``map`` over the
 recordings: Ray's local mode on this machine by default (``ray.init(num_cpus=N)``),
 or an existing cluster (``--address``).  Results stream back to the driver, which
 
@@ -168,7 +168,7 @@ def diagnose_recording(rec: Recording | dict, options: dict) -> dict:
     Returns ``{"recording", "source", "ok", "result_json", "error", "seconds", "report"}``:
     the diagnosis as JSON text, and the HTML report (bytes) when ``options["reports"]``.
     """
-    from .cli import diagnose_file
+    from .batch import diagnose_file
 
     if isinstance(rec, dict):
         rec = Recording(**{k: rec[k] for k in ("id", "path", "column", "value")})
@@ -318,7 +318,7 @@ def _record(row: dict) -> dict:
             "diagnosis": json.loads(row["result_json"]) if row["ok"] else None}
 
 
-def _init_ray(workers: int, address: str | None):
+def init_ray(workers: int, address: str | None):
     """Ray's local mode with ``workers`` CPUs, or the cluster at ``address``.  Returns
     True when this call started Ray (and so should shut it down)."""
     import logging
@@ -350,9 +350,9 @@ def run_batch(inputs: list[str], out: str | Path, *, workers: int = 1, address: 
     if options.get("rig"):
         options["rig"] = str(Path(options["rig"]).resolve())
     if options.get("model") is not None:
-        from .cli import _model_list
+        from .batch import model_list
 
-        _model_list(options["model"], ())  # refuses a bad effect name before any work
+        model_list(options["model"], ())  # refuses a bad effect name before any work
     recordings = find_recordings(inputs, id_column)
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -404,7 +404,7 @@ def _run_on_ray(todo, options, workers, address, out, rec_dir, progress, say) ->
     import ray
     import ray.data
 
-    started = _init_ray(workers, address)
+    started = init_ray(workers, address)
     logging.getLogger("ray.data").setLevel(logging.ERROR)  # its execution banners: the log lines are ours
     try:
         ctx = ray.data.DataContext.get_current()
@@ -471,9 +471,13 @@ def _cmd_batch(args: argparse.Namespace) -> int:
 
 
 def _ip_value(text: str) -> float:
-    from .cli import _ip_value as check
+    """``--ip`` for argparse (a bad value is reported as a usage error)."""
+    from .batch import inertia_ratio
 
-    return check(text)
+    try:
+        return inertia_ratio(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def add_batch_parser(sub) -> None:

@@ -28,7 +28,7 @@ import pytest
 from scipy import stats
 
 from rotor_env.diagnosis import diagnose, fit
-from rotor_env.diagnosis.compare import _Data, _known, compare
+from rotor_env.diagnosis.compare import WindowData, compare, known_values
 from rotor_env.simulator import RunUp, simulate
 from rotor_env.walkthrough import HIDDEN, NOISE
 
@@ -58,7 +58,7 @@ def _errors(clean, params, model, onsets, seeds, ip=0.3):
         comp = fit(meas, model, ip=ip, onsets=onsets)
         truth = _truth(params, comp.columns)
         z.append((comp.coefficients - truth) / comp.standard_errors)
-        plain = compare(_Data(meas, ip, "both", 0.1, None), model, _known(model), onsets, simulate=False)
+        plain = compare(WindowData(meas, ip, "both", 0.1, None), model, known_values(model), onsets, simulate=False)
         z_classical.append((plain.coefficients - truth) / plain.standard_errors)
         naive.append((comp.coefficients + comp.eiv_bias - truth) / comp.standard_errors)
     return comp.columns, np.array(z), np.array(z_classical), np.array(naive)

@@ -476,23 +476,23 @@ def test_clearance_scan_finds_the_true_clearance(seed):
     grid over its plausible bounds, then a fine scan) finds it within 2 % on a noisy run-up,
     pays for the values it tried, and the clearance found is what later fits use."""
     from rotor_env.diagnosis.candidates import _scan_parameters
-    from rotor_env.diagnosis.compare import _Data, _known, compare
+    from rotor_env.diagnosis.compare import WindowData, compare, known_values
 
     truth = {"rub_stiffness": 0.8, "rub_friction": 0.15, "rub_clearance": 0.05}
     zero = {p.name: 0.0 for e in PHYSICAL_EFFECTS for p in EFFECTS[e].parameters}
     params = RotorParams(ip=0.3, values={**zero, "k": 1.0, "tau": 0.02, "c": 0.03, **truth},
                          effects=(*PHYSICAL_EFFECTS, "rub"))
     meas = simulate(params, t_end=150.0, dt=0.02, run_up=0.02, noise=5e-4, seed=seed)
-    data = _Data(meas, 0.3, "both", 0.1, None)
+    data = WindowData(meas, 0.3, "both", 0.1, None)
     model = ("unbalance", "viscous_damping")
-    base = compare(data, model, _known(model), simulate=False)
-    scan = _scan_parameters(data, base, "rub", _known(model))
+    base = compare(data, model, known_values(model), simulate=False)
+    scan = _scan_parameters(data, base, "rub", known_values(model))
     found = scan["values"]["rub_clearance"]
     assert abs(found - 0.05) <= CLEARANCE_TOLERANCE * 0.05, found
     assert data.scanned == {"rub": {"rub_clearance": found}}
     assert 2 <= scan["tried"] <= EFFECTS["rub"].parameters[2].scan_points
     assert 0.0 < scan["active_share"] < 0.9
-    fit = compare(data, (*model, "rub"), _known(model), simulate=False)
+    fit = compare(data, (*model, "rub"), known_values(model), simulate=False)
     assert fit.physical["rub_clearance"] == found
     assert fit.physical["rub_stiffness"] == pytest.approx(0.8, rel=0.05)
     assert fit.physical["rub_friction"] == pytest.approx(0.15, rel=0.05)

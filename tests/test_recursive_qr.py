@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from identifier import RecursiveQR
-from identifier import _kernels as K
+from identifier import kernels as K
 
 RTOL = 1e-9
 

@@ -19,7 +19,7 @@ from rotor_env import (
     build_regression,
 )
 from rotor_env.effects import PHYSICAL_EFFECTS
-from rotor_env.wrappers import WRAPPER_EFFECTS, IdentificationCore
+from rotor_env.online import WRAPPER_EFFECTS, IdentificationCore
 
 IDS = rotor_env.ENV_IDS
 RUN_UP, BALANCING = IDS

@@ -14,7 +14,7 @@ from identifier.segments import SplitScan
 
 from ..effects import EFFECTS
 from ..regression import RegressionSpec, regression_columns
-from .compare import Comparison, _Data, _design, _known, compare
+from .compare import Comparison, WindowData, compare, known_values, model_design
 from .orders import complex_rows, order_map
 
 
@@ -53,7 +53,7 @@ class Candidate:
 
 
 
-def _order_profile(data: _Data, values: np.ndarray) -> np.ndarray:
+def _order_profile(data: WindowData, values: np.ndarray) -> np.ndarray:
     m = data.meas
     z = complex_rows(values, data.equation)
     _, _, amp = order_map(m.t, m.phi, m.phi_dot, z)
@@ -65,7 +65,7 @@ GRID = 160  # change-point candidates per scan (the Bonferroni factor of the sca
 ONSET_SHARE = 0.01
 
 
-def _grid(data: _Data) -> np.ndarray:
+def _grid(data: WindowData) -> np.ndarray:
     t = data.meas.t
     return np.linspace(t[0], t[-1], GRID + 2)[1:-1]
 
@@ -93,9 +93,9 @@ def _best_time(A: np.ndarray, t_rows: np.ndarray, t_grid: np.ndarray, zero_pre, 
     return float(t_grid[k]), float(J[k])
 
 
-def _appear_scan(data: _Data, base: Comparison, name: str, known: dict) -> tuple[float, float]:
+def _appear_scan(data: WindowData, base: Comparison, name: str, known: dict) -> tuple[float, float]:
     """Best onset ``t_c`` for ``name`` appearing mid-run, and the energy with it."""
-    spec, X, y, t_rows, _, _ = _design(data, (*base.model, name), known, base.onsets, base.splits)
+    spec, X, y, t_rows, _, _ = model_design(data, (*base.model, name), known, base.onsets, base.splits)
     cols = [spec.columns.index(c) for c in spec.groups[name]]
     return _best_time(np.column_stack([X, y]), t_rows, _grid(data), cols, [])
 
@@ -119,7 +119,7 @@ def _active(Z: np.ndarray, per: int) -> np.ndarray:
     return act
 
 
-def _scan_parameters(data: _Data, base: Comparison, name: str, known: dict) -> dict | None:
+def _scan_parameters(data: WindowData, base: Comparison, name: str, known: dict) -> dict | None:
     """Scan ``name``'s non-linear parameters (the rub's clearance) over their grids.
 
     Every grid value (geometric over the parameter's plausible bounds, :meth:`Parameter.scan_grid`)
@@ -140,7 +140,7 @@ def _scan_parameters(data: _Data, base: Comparison, name: str, known: dict) -> d
     per = 2 if data.equation == "both" else 1
     # the base model's columns once (the same rows as the design of base + name); the
     # effect's own columns at each value
-    _, Xb, y, _, _, _ = _design(data, base.model, known, base.onsets, base.splits)
+    _, Xb, y, _, _, _ = model_design(data, base.model, known, base.onsets, base.splits)
     Xb = Xb[:, np.linalg.norm(Xb, axis=0) > 0]
     # the base model's fit once: its orthonormal basis Q and residual; each value then only
     # fits the effect's columns with Q's span projected out (the same least squares as
@@ -191,7 +191,7 @@ def _scan_parameters(data: _Data, base: Comparison, name: str, known: dict) -> d
     return out
 
 
-def _candidate_columns(data: _Data, name: str, onset: float | None) -> np.ndarray:
+def _candidate_columns(data: WindowData, name: str, onset: float | None) -> np.ndarray:
     """The candidate's regressor columns on the window's rows (zero before an onset)."""
     spec = RegressionSpec(effects=(name,), equation=data.equation, known={}, scanned=data.scanned)
     Z = regression_columns(spec, data.data, data.ip, data.columns)
@@ -200,10 +200,10 @@ def _candidate_columns(data: _Data, name: str, onset: float | None) -> np.ndarra
     return Z
 
 
-def _wald(data: _Data, comp: Comparison, name: str, known: dict, null=None) -> tuple[float, float]:
+def _wald(data: WindowData, comp: Comparison, name: str, known: dict, null=None) -> tuple[float, float]:
     """HAC Wald test of ``name``'s coefficients in the fitted model ``comp`` against ``null``
     (0, or the value the base model assumed for it — the stiffness scale 1)."""
-    spec, X, _, _, columns, groups = _design(data, comp.model, known, comp.onsets, comp.splits)
+    spec, X, _, _, columns, groups = model_design(data, comp.model, known, comp.onsets, comp.splits)
     keep = np.flatnonzero(np.linalg.norm(X, axis=0) > 0)
     group = [c for c in (columns.index(c) for c in groups[name]) if c in set(keep.tolist())]
     if not group:
@@ -213,7 +213,7 @@ def _wald(data: _Data, comp: Comparison, name: str, known: dict, null=None) -> t
     return wald_group_test(X[:, keep], comp.residual, theta, pos, rows_per_time=spec.rows_per_sample)
 
 
-def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict, alpha: float,
+def rank_candidates(data: WindowData, base: Comparison, candidates: Sequence[str], known: dict, alpha: float,
           min_fit_gain: float, min_energy_drop: float) -> list[Candidate]:
     """Every candidate's evidence for being added to ``base`` (best first).
 
@@ -244,7 +244,7 @@ def _rank(data: _Data, base: Comparison, candidates: Sequence[str], known: dict,
             tc, J_app = _appear_scan(data, base, name, kn)
             gain = comp.energy - J_app
             # the onset must matter twice: against what is left, and against what the
-            # effect explains (on noise-free data what is left is rounding, see _change_time)
+            # effect explains (on noise-free data what is left is rounding, see change_time)
             if (comp.energy > 0 and gain >= min_energy_drop * comp.energy
                     and gain >= ONSET_SHARE * (base.energy - comp.energy)):
                 at = compare(data, (*base.model, name), kn, {**base.onsets, name: tc}, base.splits,
@@ -297,7 +297,7 @@ def _not_scanned(name: str, base: Comparison, scan: dict) -> Candidate:
     )
 
 
-def _appears_or_changes(data: _Data, comp: Comparison, effect: str, alpha: float,
+def appears_or_changes(data: WindowData, comp: Comparison, effect: str, alpha: float,
                         min_energy_drop: float) -> Comparison:
     """An effect found appearing at ``t_c``: was it there before with another value?
 
@@ -305,7 +305,7 @@ def _appears_or_changes(data: _Data, comp: Comparison, effect: str, alpha: float
     the extra coefficients are significant and remove at least ``min_energy_drop`` of
     the energy left (a crack that *grows*, D 0.03 -> 0.08, rather than one that opens).
     """
-    split = compare(data, comp.model, _known(comp.model), comp.onsets, (*comp.splits, effect))
+    split = compare(data, comp.model, known_values(comp.model), comp.onsets, (*comp.splits, effect))
     q = split.n_params - comp.n_params
     if q <= 0:
         return comp
@@ -315,10 +315,10 @@ def _appears_or_changes(data: _Data, comp: Comparison, effect: str, alpha: float
     return comp
 
 
-def _change_time(data: _Data, comp: Comparison, effect: str, known: dict, alpha: float,
+def change_time(data: WindowData, comp: Comparison, effect: str, known: dict, alpha: float,
                  min_energy_drop: float) -> float | None:
     """When an effect in the model changes mid-run: split its coefficient at ``t_c``."""
-    spec, X, y, t_rows, _, _ = _design(data, comp.model, known, comp.onsets, comp.splits)
+    spec, X, y, t_rows, _, _ = model_design(data, comp.model, known, comp.onsets, comp.splits)
     cols = [spec.columns.index(c) for c in spec.groups[effect]]
     n = X.shape[1]
     A = np.column_stack([X, X[:, cols], y])  # the effect's columns twice: before | after

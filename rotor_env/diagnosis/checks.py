@@ -38,7 +38,7 @@ import numpy as np
 from identifier.hac import chi2_log10_sf, hac_covariance
 
 from ..effects import EFFECTS
-from .compare import Comparison, _Data, _design, _known, compare
+from .compare import Comparison, WindowData, compare, known_values, model_design
 from .orders import complex_rows, order_map
 
 __all__ = ["CONSISTENCY_LOG10_P", "CONSISTENCY_SPREAD", "check_candidate"]
@@ -70,11 +70,11 @@ def _plausible(comp: Comparison, effect: str) -> tuple[str | None, dict]:
     return None, {"parameters": {p.name: values.get(p.name) for p in EFFECTS[effect].parameters}}
 
 
-def _pre_onset_ratio(data: _Data, model, known: dict, onsets: dict, splits, onset: float,
+def _pre_onset_ratio(data: WindowData, model, known: dict, onsets: dict, splits, onset: float,
                      floor: float) -> float | None:
     """RMS over the floor of ``model`` refitted to the rows before ``onset`` alone (fitted
     to the whole record its coefficients would be pulled by the misfit after it)."""
-    _, X, y, t_rows, _, _ = _design(data, model, known, onsets, splits)
+    _, X, y, t_rows, _, _ = model_design(data, model, known, onsets, splits)
     sel = t_rows < onset
     X = X[:, np.linalg.norm(X[sel], axis=0) > 0]
     if sel.sum() < 50 * max(1, X.shape[1]) or floor <= 0:
@@ -85,7 +85,7 @@ def _pre_onset_ratio(data: _Data, model, known: dict, onsets: dict, splits, onse
     return float(np.sqrt(np.mean(pre * pre)) / floor)
 
 
-def _onset(data: _Data, base: Comparison, cand, floor: float, library: tuple[str, ...]) -> tuple[str | None, dict]:
+def _onset(data: WindowData, base: Comparison, cand, floor: float, library: tuple[str, ...]) -> tuple[str | None, dict]:
     """An effect *appearing* at ``t_c`` leaves the data before ``t_c`` explainable without it.
 
     The rows before ``t_c`` are refitted with the widest model the library offers
@@ -107,7 +107,7 @@ def _onset(data: _Data, base: Comparison, cand, floor: float, library: tuple[str
     widest = tuple(dict.fromkeys(e for e in (*base.model, *library) if e != name))
     if "unbalance_in_phase" in widest:
         widest = tuple(e for e in widest if e != "unbalance")
-    known = {k: v for k, v in _known(widest).items() if k != name}
+    known = {k: v for k, v in known_values(widest).items() if k != name}
     without = _pre_onset_ratio(data, widest, known, base.onsets, base.splits, onset, floor)
     if without is None:
         return None, {}
@@ -117,7 +117,7 @@ def _onset(data: _Data, base: Comparison, cand, floor: float, library: tuple[str
     with_it = _pre_onset_ratio(data, (*widest, name), known, base.onsets, base.splits, onset, floor)
     info["with_the_effect_before_onset_over_floor"] = with_it
     if with_it is not None and with_it <= ONSET_FLOOR_RATIO:
-        kn = {k: v for k, v in _known(base.model).items() if k != name}
+        kn = {k: v for k, v in known_values(base.model).items() if k != name}
         cand.comparison = compare(data, (*base.model, name), kn, {**base.onsets, name: onset},
                                   (*base.splits, name))
         cand.fit_gain = cand.comparison.fit_percent - base.fit_percent
@@ -128,9 +128,9 @@ def _onset(data: _Data, base: Comparison, cand, floor: float, library: tuple[str
             "appears nor changes there (a fault present from the start)"), info
 
 
-def _window_estimates(data: _Data, comp: Comparison, effect: str, start: float | None):
+def _window_estimates(data: WindowData, comp: Comparison, effect: str, start: float | None):
     """Per time window: the effect's coefficients and their HAC covariance."""
-    spec, X, y, t_rows, columns, _ = _design(data, comp.model, _known(comp.model), comp.onsets, comp.splits)
+    spec, X, y, t_rows, columns, _ = model_design(data, comp.model, known_values(comp.model), comp.onsets, comp.splits)
     idx = [columns.index(c) for c in spec.groups[effect]]
     lo = data.meas.t[0] if start is None else start
     edges = np.linspace(lo, data.meas.t[-1], WINDOWS + 1)
@@ -149,7 +149,7 @@ def _window_estimates(data: _Data, comp: Comparison, effect: str, start: float |
     return out
 
 
-def _consistent(data: _Data, comp: Comparison, effect: str, onset: float | None,
+def _consistent(data: WindowData, comp: Comparison, effect: str, onset: float | None,
                 null: np.ndarray | None) -> tuple[str | None, dict]:
     est = _window_estimates(data, comp, effect, onset)
     if len(est) < 2:
@@ -174,7 +174,7 @@ def _consistent(data: _Data, comp: Comparison, effect: str, onset: float | None,
     return None, info
 
 
-def order_energy(data: _Data, residual: np.ndarray, orders, width: float = 0.25) -> float:
+def order_energy(data: WindowData, residual: np.ndarray, orders, width: float = 0.25) -> float:
     """Residual energy at the given rotation orders, both whirl directions (order tracked)."""
     m = data.meas
     _, ords, amp = order_map(m.t, m.phi, m.phi_dot, complex_rows(residual, data.equation))
@@ -187,7 +187,7 @@ def order_energy(data: _Data, residual: np.ndarray, orders, width: float = 0.25)
     return float(power[sel].sum())
 
 
-def _removes_its_orders(data: _Data, base: Comparison, comp: Comparison, effect: str,
+def _removes_its_orders(data: WindowData, base: Comparison, comp: Comparison, effect: str,
                         fit_gain: float, floor: float) -> tuple[str | None, dict]:
     info: dict = {"fit_gain": fit_gain}
     # a model whose equation error is down to the noise floor is not the wrong physics: a
@@ -209,7 +209,7 @@ def _removes_its_orders(data: _Data, base: Comparison, comp: Comparison, effect:
     return None, info
 
 
-def _gyro_rows(data: _Data) -> np.ndarray:
+def _gyro_rows(data: WindowData) -> np.ndarray:
     """``d y / d ip`` per regression row: the gyroscopic moment moved to the output side."""
     d = data.data
     first, second = d[:, 2] * d[:, 6], -d[:, 2] * d[:, 7]  # phid th_x',  -phid th_y'
@@ -222,14 +222,14 @@ def _gyro_rows(data: _Data) -> np.ndarray:
     return g
 
 
-def _not_the_ip(data: _Data, comp: Comparison, effect: str, null: np.ndarray | None) -> tuple[str | None, dict]:
+def _not_the_ip(data: WindowData, comp: Comparison, effect: str, null: np.ndarray | None) -> tuple[str | None, dict]:
     """With ``ip`` estimated from the data, an effect that the estimate's own uncertainty
     moves by as much as its size is not told apart from an error in ``ip`` (a 0.002 error
     in ip reads as a 0.3 % stiffness change through the gyroscopic moment)."""
     delta = data.ip_uncertainty
     if not delta:
         return None, {}
-    spec, X, _, _, columns, _ = _design(data, comp.model, _known(comp.model), comp.onsets, comp.splits)
+    spec, X, _, _, columns, _ = model_design(data, comp.model, known_values(comp.model), comp.onsets, comp.splits)
     keep = np.flatnonzero(np.linalg.norm(X, axis=0) > 0)
     idx = [columns.index(c) for c in spec.groups[effect]]
     if not set(idx) <= set(keep.tolist()):
@@ -244,7 +244,7 @@ def _not_the_ip(data: _Data, comp: Comparison, effect: str, null: np.ndarray | N
     return None, info
 
 
-def check_candidate(data: _Data, base: Comparison, cand, floor: float,
+def check_candidate(data: WindowData, base: Comparison, cand, floor: float,
                     library: tuple[str, ...] = ()) -> tuple[str | None, dict]:
     """The first rule that rejects ``cand`` (None: it passes), and the numbers of every check run.
 
@@ -253,7 +253,7 @@ def check_candidate(data: _Data, base: Comparison, cand, floor: float,
     evidence: dict = {}
     if getattr(cand, "scan", None) is not None:
         evidence["scan"] = cand.scan  # the non-linear parameter's scan (the rub's clearance)
-    known = _known(base.model)
+    known = known_values(base.model)
     null = (np.asarray(EFFECTS[cand.effect].to_coefficients(known[cand.effect]), dtype=float)
             if cand.effect in known else None)
     for name, run in (

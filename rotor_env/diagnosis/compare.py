@@ -108,7 +108,7 @@ PREFILTER_ORDERS = 10.0
 NOISE_DETECTION = 1e-4
 
 
-def _white_level(x: np.ndarray) -> float:
+def white_noise_level(x: np.ndarray) -> float:
     """White-noise standard deviation of a sampled channel (third differences: a smooth
     signal vanishes in them, white noise grows by sqrt(20))."""
     d = np.diff(x, 3)
@@ -129,7 +129,7 @@ def prefilter_cutoff(speed: np.ndarray, dt: float) -> float | None:
     return fc if fc < 0.2 / dt else None
 
 
-class _Data:
+class WindowData:
     """Measurements restricted to the informative window, prefiltered, with caches.
 
     ``raw`` keeps the unfiltered samples of the window (the noise floor is read from
@@ -153,14 +153,14 @@ class _Data:
             raise ValueError(f"only {len(self.raw)} samples after t = {t_start:g}: too few to diagnose")
         dt = float(np.median(np.diff(meas.t)))
         # the prefilter is for sensor noise: a record without any (a simulation) keeps its samples
-        noisy = _white_level(meas.theta_x) + _white_level(meas.theta_y) > NOISE_DETECTION * float(amp.max())
+        noisy = white_noise_level(meas.theta_x) + white_noise_level(meas.theta_y) > NOISE_DETECTION * float(amp.max())
         #: the record carries sensor noise (a simulation without noise does not)
         self.noisy = bool(noisy)
         self.cutoff = prefilter_cutoff(meas.phi_dot, dt) if prefilter and noisy and len(meas) > 60 else None
         self.noise_gain = 1.0
         self.sos = None
         # each inclination channel's white-noise level (the errors-in-variables correction adds more)
-        self.channel_noise = np.array([_white_level(meas.data[:, j]) for j in range(4, 10)]) if noisy else None
+        self.channel_noise = np.array([white_noise_level(meas.data[:, j]) for j in range(4, 10)]) if noisy else None
         self.window_start = int(np.argmax(meas.t >= t_start))
         filtered = meas
         if self.cutoff is not None:
@@ -195,7 +195,7 @@ class _Data:
         # samples (the errors-in-variables replicates' view) start a new cache
         self._data = value
         self.columns: ColumnCache = {}
-        #: the latest models' designs on these samples (:func:`_design`)
+        #: the latest models' designs on these samples (:func:`model_design`)
         self.designs: dict[str, tuple] = {}
         #: (effect, onset, scanned values) -> the order spectrum of its columns (the evidence)
         self.order_profiles: dict[str, np.ndarray] = {}
@@ -204,7 +204,7 @@ class _Data:
         self.active_share: dict[tuple[str, float], float] = {}
 
 
-def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, float],
+def model_design(data: WindowData, model: Sequence[str], known: dict, onsets: dict[str, float],
             splits: Iterable[str] = (), *, raw: bool = False):
     """``spec, X, y, t_rows, columns, groups`` of a model (``raw``: on the unfiltered samples).
 
@@ -227,7 +227,7 @@ def _design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, fl
     return out
 
 
-def _build_design(data: _Data, model: Sequence[str], known: dict, onsets: dict[str, float],
+def _build_design(data: WindowData, model: Sequence[str], known: dict, onsets: dict[str, float],
                   splits: Iterable[str], raw: bool):
     spec = RegressionSpec(effects=tuple(model), equation=data.equation, known=known or {},
                           scanned=getattr(data, "scanned", {}))
@@ -249,7 +249,7 @@ def _build_design(data: _Data, model: Sequence[str], known: dict, onsets: dict[s
     return spec, X, y, t_rows, tuple(columns), groups
 
 
-def _physical_values(spec: RegressionSpec, columns: Sequence[str], coef: np.ndarray,
+def physical_values(spec: RegressionSpec, columns: Sequence[str], coef: np.ndarray,
                      splits: Sequence[str]) -> tuple[dict[str, float], dict[str, float]]:
     """Physical parameters of the coefficients, and (for split effects) their values before."""
     n = spec.n_columns
@@ -266,7 +266,7 @@ def _physical_values(spec: RegressionSpec, columns: Sequence[str], coef: np.ndar
 
 
 def compare(
-    data: _Data,
+    data: WindowData,
     model: Sequence[str],
     known: dict | None = None,
     onsets: dict[str, float] | None = None,
@@ -284,7 +284,7 @@ def compare(
     """
     onsets = dict(onsets or {})
     splits = tuple(e for e in splits if e in onsets)
-    spec, X, y, _, columns, groups = _design(data, model, known or {}, onsets, splits)
+    spec, X, y, _, columns, groups = model_design(data, model, known or {}, onsets, splits)
     _check_finite_rows(data, X, y, spec.rows_per_sample)
     est = RecursiveQR(columns=columns, groups=groups).fit(X, y)
     coef = est.coefficients()
@@ -297,7 +297,7 @@ def compare(
         raise ValueError(f"{data.full.source}: the fit of {', '.join(model)} is not finite (residual energy {J:.3g}): "
                          f"the values near t = {float(data.meas.t[r // spec.rows_per_sample]):.6g} overflow the model's "
                          "numbers")
-    physical, physical_before = _physical_values(spec, columns, coef, splits)
+    physical, physical_before = physical_values(spec, columns, coef, splits)
     sig = est.effect_tests().to_dict()
     comp = Comparison(
         model=tuple(model), columns=columns, coefficients=coef, standard_errors=est.standard_errors(),
@@ -313,7 +313,7 @@ def compare(
     return comp
 
 
-def _check_finite_rows(data: _Data, X: np.ndarray, y: np.ndarray, per: int) -> None:
+def _check_finite_rows(data: WindowData, X: np.ndarray, y: np.ndarray, per: int) -> None:
     """Every regression row finite, and small enough that its square is (the energies)."""
     with np.errstate(over="ignore", invalid="ignore"):
         if np.isfinite(X).all() and np.isfinite(y).all() and np.abs(X).max(initial=0.0) <= 1e150 \
@@ -327,7 +327,7 @@ def _check_finite_rows(data: _Data, X: np.ndarray, y: np.ndarray, per: int) -> N
                          "products; check it")
 
 
-def _culprit(data: _Data) -> str:
+def _culprit(data: WindowData) -> str:
     """Where the record holds a value beyond 1e100 (the prefilter spreads it over its neighbours)."""
     from ..measurements import COLUMNS
 
@@ -340,9 +340,9 @@ def _culprit(data: _Data) -> str:
     return f" (from sample {r} of the record, t = {float(full[r, 0]):.6g}: {COLUMNS[c]} = {float(full[r, c])!r})"
 
 
-def make_robust(data: _Data, comp: Comparison, alpha: float = 0.05) -> Comparison:
+def make_robust(data: WindowData, comp: Comparison, alpha: float = 0.05) -> Comparison:
     """Replace ``comp``'s standard errors and effect tests by the HAC ones (in place)."""
-    spec, X, _, _, _, groups = _design(data, comp.model, _known(comp.model), comp.onsets, comp.splits)
+    spec, X, _, _, _, groups = model_design(data, comp.model, known_values(comp.model), comp.onsets, comp.splits)
     _robust_statistics(comp, X, groups, alpha, spec.rows_per_sample)
     return comp
 
@@ -371,7 +371,7 @@ def _robust_statistics(comp: Comparison, X: np.ndarray, groups: dict[str, tuple[
     comp.significance = sig
 
 
-def _free_run(comp: Comparison, data: _Data, known: dict) -> None:
+def _free_run(comp: Comparison, data: WindowData, known: dict) -> None:
     """Output-error simulation, split where an effect appears (it is absent before)."""
     m = data.meas
     cuts = sorted({tc for tc in comp.onsets.values() if m.t[0] < tc < m.t[-1]})
@@ -416,5 +416,5 @@ def _free_run(comp: Comparison, data: _Data, known: dict) -> None:
     comp.fit_bands = bands
 
 
-def _known(model: Iterable[str], k: float = 1.0) -> dict:
+def known_values(model: Iterable[str], k: float = 1.0) -> dict:
     return {} if "stiffness" in model else {"stiffness": {"k": k}}

@@ -22,7 +22,7 @@ line keeps the extrapolation's own noise small — each draw moves the estimate 
 standard deviation of ``SE / sqrt(sum B lambda)`` (0.29 SE here); a quadratic
 extrapolant multiplies it several times (tried: coverage fell).  It needs no model of how a column depends on
 the noise (any effect, user effects included) and only the channels' noise level,
-which is read from the data (:func:`~rotor_env.diagnosis.compare._white_level`).
+which is read from the data (:func:`~rotor_env.diagnosis.compare.white_noise_level`).
 
 The correction is reported beside the estimate (``Comparison.eiv_bias``: naive minus
 corrected) and the corrected coefficients replace the naive ones; the standard
@@ -36,7 +36,7 @@ import copy
 
 import numpy as np
 
-from .compare import Comparison, _Data, _design, _known, _physical_values
+from .compare import Comparison, WindowData, known_values, model_design, physical_values
 
 __all__ = ["LEVELS", "REPLICATES", "correct_errors_in_variables", "simex_correct"]
 
@@ -48,17 +48,17 @@ REPLICATES = 1
 CHANNELS = slice(4, 10)
 
 
-def _fit_on(data: _Data, samples: np.ndarray, comp: Comparison) -> np.ndarray:
+def _fit_on(data: WindowData, samples: np.ndarray, comp: Comparison) -> np.ndarray:
     view = copy.copy(data)
     view.data = np.ascontiguousarray(samples)
-    _, X, y, _, _, _ = _design(view, comp.model, _known(comp.model), comp.onsets, comp.splits)
+    _, X, y, _, _, _ = model_design(view, comp.model, known_values(comp.model), comp.onsets, comp.splits)
     keep = np.linalg.norm(X, axis=0) > 0
     theta = np.zeros(X.shape[1])
     theta[keep], *_ = np.linalg.lstsq(X[:, keep], y, rcond=None)
     return theta
 
 
-def simex_correct(data: _Data, comp: Comparison, seed: int = 0) -> np.ndarray | None:
+def simex_correct(data: WindowData, comp: Comparison, seed: int = 0) -> np.ndarray | None:
     """SIMEX-corrected coefficients of ``comp`` (None where there is nothing to correct:
     noise-free data, or no prefilter to reproduce).
 
@@ -89,17 +89,17 @@ def simex_correct(data: _Data, comp: Comparison, seed: int = 0) -> np.ndarray | 
     return base - slope
 
 
-def correct_errors_in_variables(data: _Data, comp: Comparison, seed: int = 0) -> Comparison:
+def correct_errors_in_variables(data: WindowData, comp: Comparison, seed: int = 0) -> Comparison:
     """Replace ``comp``'s coefficients and physical values by the SIMEX-corrected ones (in
     place; ``comp.eiv_bias`` keeps what was removed).  The residual, the tests and the
     standard errors stay those of the fit."""
     corrected = simex_correct(data, comp, seed)
     if corrected is None or comp.eiv_bias is not None:
         return comp
-    spec, _, _, _, columns, _ = _design(data, comp.model, _known(comp.model), comp.onsets, comp.splits)
+    spec, _, _, _, columns, _ = model_design(data, comp.model, known_values(comp.model), comp.onsets, comp.splits)
     comp.eiv_bias = comp.coefficients - corrected
     comp.coefficients = corrected
-    comp.physical, before = _physical_values(spec, columns, corrected, comp.splits)
+    comp.physical, before = physical_values(spec, columns, corrected, comp.splits)
     if comp.splits:
         comp.physical_before = before
     return comp

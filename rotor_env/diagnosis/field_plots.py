@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..effects import whirl_effects
 from ..measurements.vectors import fit_orders, keyphasor_times, order_track
 from .orders import order_map
 from .synchronous import SynchronousModel, whirl_branches
@@ -427,8 +428,10 @@ def plot_waterfall(
 
 
 # ------------------------------------------------------------------ Campbell
-#: the fixed-frame effects of :func:`whirl_frequencies` (after the implicit stiffness)
-_WHIRL_EFFECTS = ("viscous_damping", "support_anisotropy", "cross_coupled_stiffness")
+def _whirl_model_effects() -> tuple[str, ...]:
+    """The fixed-frame effects of :func:`whirl_frequencies` after the implicit stiffness: those
+    declared ``whirl=True`` (:attr:`rotor_env.effects.Effect.whirl`)."""
+    return tuple(e for e in whirl_effects() if e != "stiffness")
 
 
 def whirl_frequencies(
@@ -438,6 +441,7 @@ def whirl_frequencies(
     ip: float,
     anisotropy: float = 0.0,
     cross_coupling: float = 0.0,
+    others: Mapping[str, Sequence[float]] | None = None,
 ) -> dict[str, np.ndarray]:
     """Damped natural (whirl) frequencies of the linear fixed-frame rotor at each speed.
 
@@ -466,9 +470,12 @@ def whirl_frequencies(
     periodic coefficients, which need Floquet analysis), non-linear stiffness and dry
     friction.
     """
-    model = SynchronousModel(_WHIRL_EFFECTS, ip=float(ip))
-    values = (stiffness, damping, anisotropy, cross_coupling)
-    coef = model.coef_vector({e: np.array([float(v)]) for e, v in zip(model.layout, values, strict=True)})
+    model = SynchronousModel(_whirl_model_effects(), ip=float(ip))
+    # ``others``: the coefficients of further declared whirl effects (absent ones are 0)
+    given = {"stiffness": stiffness, "viscous_damping": damping, "support_anisotropy": anisotropy,
+             "cross_coupled_stiffness": cross_coupling, **(others or {})}
+    coef = model.coef_vector({e: np.atleast_1d(np.asarray(given[e], dtype=float)) for e in model.layout
+                              if e in given})
     return whirl_branches(model, coef, speed)
 
 

@@ -28,7 +28,8 @@ import numpy as np
 
 from ..measurements.rig import SPEED_UNITS
 from ..measurements.waveforms import LENGTH_UNIT, RigRecord
-from .from_vectors import VectorDiagnosis, _jsonable, diagnose_vectors
+from ..results import jsonable
+from .from_vectors import VectorDiagnosis, diagnose_vectors
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES
 from .oe_diagnosis import OutputErrorDiagnosis, diagnose_output_error
 from .output_error import ShootingGrid, noise_std_high_band
@@ -89,7 +90,7 @@ class RigDiagnosis:
         return d
 
     def to_json(self, **kwargs) -> str:
-        return json.dumps(_jsonable(self.to_dict()), **kwargs)
+        return json.dumps(jsonable(self.to_dict()), **kwargs)
 
     def summary(self) -> str:
         lines = [f"rig recording {self.record.source} ({self.record.rig.model}, "

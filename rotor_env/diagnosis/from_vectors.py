@@ -32,6 +32,7 @@ from identifier.hac import hac_covariance, wald_test
 
 from ..effects import get_effect
 from ..measurements.vectors import SPEED_UNITS, VectorTable, to_phase
+from ..results import jsonable
 from .synchronous import RUNOUT, SECOND_MODE, SynchronousModel, VectorFit, fit_vectors
 from .verdict import FLOOR_RATIO, verdict_of
 
@@ -91,9 +92,9 @@ def check_whirl_direction(table: VectorTable, floor: float) -> None:
     if table.angles is None or len(table.probes) < 2:
         return
     from ..measurements.vectors import VectorTableError
-    from .synchronous import _probe_matrix
+    from .synchronous import vector_probe_matrix
 
-    P = _probe_matrix(table)
+    P = vector_probe_matrix(table)
     Y = table.vectors[1]
     ok = np.isfinite(Y).all(axis=1)
     Q = np.linalg.lstsq(P, Y[ok].T, rcond=None)[0]  # (2, rows): Q_u, Q_v
@@ -248,7 +249,7 @@ class VectorDiagnosis:
             "rms_ratio_after": ratio,
             "natural_frequency_rpm": self.after.w_ref / SPEED_UNITS["rpm"],
             "natural_frequency_rpm_standard_error": self.natural_frequency_se(),
-            "physical": _jsonable(self.after.values()),
+            "physical": jsonable(self.after.values()),
             "candidates": self.tested,
             "rejected": self.rejected,
             "unbalance": self.unbalance(),
@@ -258,7 +259,7 @@ class VectorDiagnosis:
         }
 
     def to_json(self, **kwargs) -> str:
-        return json.dumps(_jsonable(self.to_dict()), **kwargs)
+        return json.dumps(jsonable(self.to_dict()), **kwargs)
 
     def summary(self) -> str:
         d = self.to_dict()
@@ -328,14 +329,14 @@ class VectorDiagnosis:
     def plot_campbell(self, ax=None):
         """Whirl frequencies of the final model against speed, the 1x line and the criticals."""
         from .field_plots import plot_campbell
-        from .synchronous import _modes
+        from .synchronous import whirl_modes
 
         rpm = np.linspace(0.0, float(self.table.rpm.max()) * 1.1, 120)
         coef = self.after.coef()
         w_ref = self.after.w_ref
         branches: dict[str, list[float]] = {"forward whirl": [], "backward whirl": []}
         for r in rpm:
-            lam, share = _modes(self.after.model, coef, r * SPEED_UNITS["rpm"] / w_ref)
+            lam, share = whirl_modes(self.after.model, coef, r * SPEED_UNITS["rpm"] / w_ref)
             hz = np.abs(lam.imag) * w_ref / (2 * math.pi)
             branches["forward whirl"].append(float(hz[share >= 0.5].min()) if (share >= 0.5).any() else np.nan)
             # backward whirl frequencies are negative (the plot's convention)
@@ -420,18 +421,6 @@ def _cause(name: str) -> str:
     if name == RUNOUT:
         return "probe runout: a constant 1X vector (mechanical/electrical runout of the probe track), seen at slow roll"
     return get_effect(name).cause
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.generic):
-        x = x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
 
 
 def diagnose_vectors(

@@ -2,32 +2,26 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..effects import Effect, Parameter, get_effect, register_effect
+from ..effects import (
+    DerivedNames,
+    Effect,
+    Parameter,
+    candidate_effects,
+    get_effect,
+    register_effect,
+)
 
 DEFAULT_MODEL: tuple[str, ...] = ("unbalance", "viscous_damping")
-#: candidates by default: every physical library effect (the paper's in-phase unbalance is a
-#: preset variant of ``unbalance``, not a separate candidate)
-LIBRARY_CANDIDATES: tuple[str, ...] = (
-    "unbalance",
-    "viscous_damping",
-    "asymmetry",
-    "nonlinear_stiffness",
-    "structural_damping",
-    "stiffness",
-    "static_load",
-    "shaft_bow",
-    "support_anisotropy",
-    "cross_coupled_stiffness",
-    "misalignment",
-    "breathing_crack",
-    "rub",
-)
+#: candidates by default: every library effect declared ``candidate=True``, read from the
+#: registry when used (the paper's in-phase unbalance is a preset variant of ``unbalance``,
+#: not a separate candidate)
+LIBRARY_CANDIDATES: Sequence[str] = DerivedNames(candidate_effects)
 
 
 # ------------------------------------------------------------------ the model
@@ -61,7 +55,7 @@ class Model:
         return len(self.effects)
 
 
-def _as_model(model) -> Model:
+def as_model(model) -> Model:
     if model is None:
         return Model()
     if isinstance(model, Model):
@@ -154,7 +148,7 @@ def load_user_effect(spec: str) -> Effect:
     if obj is None:
         raise ValueError(f"--effect {spec}: module {mod_name!r} has no attribute {attr!r}")
     effect = obj if isinstance(obj, Effect) else effect_from_function(obj, attr)
-    from .. import PACKAGE_EFFECTS  # the library as the package ships it (import-time snapshot)
+    from ..effects import PACKAGE_EFFECTS  # the library as the package ships it
 
     if effect.name in PACKAGE_EFFECTS and PACKAGE_EFFECTS[effect.name] is not effect:
         # a plug-in must not silently replace a library effect: every later diagnosis in
@@ -165,7 +159,7 @@ def load_user_effect(spec: str) -> Effect:
     return register_effect(effect, replace=True)
 
 
-def _validate_columns(eff: Effect, data: np.ndarray, ip: float) -> None:
+def validate_columns(eff: Effect, data: np.ndarray, ip: float) -> None:
     args = (data[:, 1], data[:, 2], data[:, 3], data[:, 4], data[:, 5], data[:, 6], data[:, 7], ip)
     try:
         Xy, Xx = eff.regressors(*args)

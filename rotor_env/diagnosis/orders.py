@@ -110,5 +110,5 @@ def failing_windows(t: np.ndarray, r: np.ndarray, width: float = 2.0, factor: fl
     return out, floor
 
 
-def _first_rows(values: np.ndarray, equation: str) -> np.ndarray:
+def first_rows(values: np.ndarray, equation: str) -> np.ndarray:
     return values[0::2] if equation == "both" else values

@@ -11,9 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..effects import whirl_effects
 from ..outputs import atomic_write, atomic_write_text, check_writable
 from . import field_plots as fp
-from .orders import _first_rows, autocorrelation, complex_rows, failing_windows, order_map
+from .orders import autocorrelation, complex_rows, failing_windows, first_rows, order_map
+from .verdict import VERDICT_TEXT
 
 
 @dataclass(frozen=True)
@@ -187,7 +189,7 @@ class DiagnosisFigures:
         if which == "before":
             windows = self.windows
         else:  # where the final model still fails (against the same floor)
-            windows, _ = failing_windows(m.t, _first_rows(comp.residual, self.equation), floor=self.noise_floor)
+            windows, _ = failing_windows(m.t, first_rows(comp.residual, self.equation), floor=self.noise_floor)
         for w in windows:
             ax.axvspan(w["t_start"] * u.time_factor, w["t_end"] * u.time_factor, color="orange", alpha=0.2)
         ax.axhline(2 * self.noise_floor, color="k", lw=0.5, ls=":")
@@ -268,7 +270,7 @@ class DiagnosisFigures:
         """Residual autocorrelation with 95 % bounds for white noise."""
         fig, ax = self._ax(ax)
         comp = self.before if which == "before" else self.after
-        r = _first_rows(comp.residual, self.equation)
+        r = first_rows(comp.residual, self.equation)
         ac = autocorrelation(r, max_lag)
         dt = self.data.meas.dt
         u = self.plot_units()
@@ -333,8 +335,8 @@ class DiagnosisFigures:
         u = self.plot_units()
         m = self.data.meas
         t = u.time(m.t)
-        r0 = _first_rows(self.before.residual, self.equation)
-        r1 = _first_rows(self.after.residual, self.equation)
+        r0 = first_rows(self.before.residual, self.equation)
+        r1 = first_rows(self.after.residual, self.equation)
         ax.plot(t, r0, lw=0.3, color="C3", label=f"starting model (RMS {self.before.rms:.3g})")
         ax.plot(t, r1, lw=0.3, color="C0", label=f"final model (RMS {self.after.rms:.3g})")
         ax.axhspan(-2 * self.noise_floor, 2 * self.noise_floor, color="0.5", alpha=0.25,
@@ -449,8 +451,7 @@ class DiagnosisFigures:
         fig = fp.plot_campbell(u.speed(speed), {k: u.frequency(w) for k, w in branches.items()},
                                measured_peaks=(u.speed(ps), u.frequency(pw)) if len(ps) else None,
                                speed_unit=u.speed_unit, ax=ax)
-        covered = [e for e in ("viscous_damping", "stiffness", "support_anisotropy", "cross_coupled_stiffness")
-                   if e in self.model]
+        covered = [e for e in whirl_effects() if e in self.model]
         _first_axes(fig, ax).set_title(
             "Campbell diagram of the final model (linear fixed-frame part: ip"
             + (", " + ", ".join(covered) if covered else "") + ")", fontsize=9)
@@ -529,8 +530,6 @@ class DiagnosisFigures:
 
         Every string from data or user input (effect names, rules, notes) is escaped.
         """
-        from .result import VERDICT_TEXT  # result imports this module
-
         verdict = str(self.verdict)
         template = VERDICT_TEXT.get(verdict)
         sentence = template.format(ratio=self.rms_ratio_after, floor=self.noise_floor) if template else ""

@@ -9,20 +9,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..effects import EFFECTS
+from ..results import jsonable
 from .candidates import Candidate
-from .compare import Comparison, _Data, _known, compare
+from .compare import Comparison, WindowData, compare, known_values
 from .model import Model
 from .report import DiagnosisFigures
-
-VERDICT_TEXT = {
-    "explained": "the starting model explains the data: residual {ratio:.2g}x the noise floor ({floor:.3g})",
-    "explained_after_adding": "explained after adding the missing effects: residual {ratio:.2g}x the noise "
-    "floor ({floor:.3g})",
-    "partly_explained": "effects were added, but the residual still stands at {ratio:.2g}x the noise floor "
-    "({floor:.3g}): something the library does not hold is left",
-    "unexplained": "the residual stands at {ratio:.2g}x the noise floor ({floor:.3g}) and no library effect "
-    "explains it (see the candidates turned down)",
-}
+from .verdict import VERDICT_TEXT
 
 
 @dataclass
@@ -46,7 +38,7 @@ class NotIdentifiableResult:
                 "noise_floor": None, "rms_ratio_after": None, "notes": self.notes}
 
     def to_json(self, **kwargs) -> str:
-        return json.dumps(_jsonable(self.to_dict()), **kwargs)
+        return json.dumps(jsonable(self.to_dict()), **kwargs)
 
     def summary(self) -> str:
         return (f"rotor-id diagnosis of {self.source or 'measurements'}\n"
@@ -85,7 +77,7 @@ class Diagnosis(DiagnosisFigures):
     after: Comparison
     windows: list[dict]
     noise_floor: float
-    data: _Data = field(repr=False)
+    data: WindowData = field(repr=False)
     steps: list[Comparison] = field(default_factory=list, repr=False)  # after each addition
     verdict: str = "explained"           # see rotor_env.diagnosis.verdict
     rms_ratio_after: float = math.nan     # final residual RMS / noise floor
@@ -107,7 +99,7 @@ class Diagnosis(DiagnosisFigures):
         """The final model with more effects, compared (one call to add an effect); its
         standard errors and tests are the HAC ones, as the diagnosis reports them."""
         model = Model(self.model).add(*names).effects
-        return compare(self.data, model, _known(model), self.after.onsets, self.after.splits, robust=True,
+        return compare(self.data, model, known_values(model), self.after.onsets, self.after.splits, robust=True,
                        alpha=self.alpha)
 
     # -------------------------------------------------------------- text/JSON
@@ -156,7 +148,7 @@ class Diagnosis(DiagnosisFigures):
         }
 
     def to_json(self, **kwargs) -> str:
-        return json.dumps(_jsonable(self.to_dict()), **kwargs)
+        return json.dumps(jsonable(self.to_dict()), **kwargs)
 
     def summary(self) -> str:
         b, a = self.before, self.after
@@ -240,18 +232,3 @@ class Diagnosis(DiagnosisFigures):
                      + (" values corrected for the sensor noise in the regressors by SIMEX)" if a.eiv_bias is not None
                         else ")"))
         return "\n".join(lines)
-
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return float(x) if math.isfinite(float(x)) else None
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x

@@ -29,7 +29,7 @@ from identifier.hac import hac_covariance
 from ..effects import EFFECTS
 from ..measurements import Measurements
 from ..regression import RegressionSpec, regression_arrays
-from .compare import _white_level
+from .compare import white_noise_level
 from .orders import noise_floor
 
 __all__ = ["MIN_REVOLUTIONS", "MIN_SAMPLES", "InertiaEstimate", "NotIdentifiable", "check_excitation",
@@ -57,7 +57,7 @@ def check_excitation(meas: Measurements) -> None:
                               f"(at least {MIN_REVOLUTIONS:g} are needed)")
     amp = np.hypot(meas.theta_x, meas.theta_y)
     peak = float(amp.max())
-    noise = max(_white_level(meas.theta_x), _white_level(meas.theta_y))
+    noise = max(white_noise_level(meas.theta_x), white_noise_level(meas.theta_y))
     if peak == 0.0:
         raise NotIdentifiable("no excitation: the inclinations are zero throughout (the rotor never leaves rest)")
     if noise > 0 and peak < MIN_SIGNAL_TO_NOISE * noise:

@@ -54,7 +54,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq, least_squares
 
-from ..effects import EFFECTS, get_effect
+from ..effects import EFFECTS, DerivedNames, get_effect, synchronous_effects
 from ..measurements.vectors import SPEED_UNITS, OrderTracker, VectorTable
 from ..simulator import call_integrate_profile, compile_accel, smooth_effects
 
@@ -74,10 +74,9 @@ RUNOUT = "runout"
 #: a second mode of the rotor-bearing system in the speed range (another critical speed):
 #: an isotropic oscillator of its own natural frequency, damping and modal unbalance
 SECOND_MODE = "second_mode"
-#: effects that show in 1X data and that the synchronous model can carry
-VECTOR_EFFECTS: tuple[str, ...] = (
-    "viscous_damping", "unbalance", "shaft_bow", "support_anisotropy", "cross_coupled_stiffness",
-)
+#: effects that show in 1X data and that the synchronous model can carry: those declared
+#: ``synchronous=True`` (:attr:`rotor_env.effects.Effect.synchronous`), read from the registry
+VECTOR_EFFECTS: Sequence[str] = DerivedNames(synchronous_effects)
 #: quasi-steady is used only where it is within this fraction of the peak of the transient
 QUASI_STEADY_TOL = 0.01
 #: the record starts this many revolutions before the first row (initial transient settles)
@@ -253,7 +252,7 @@ class VectorFit:
 
 
 # ----------------------------------------------------------------- predictions
-def _probe_matrix(table: VectorTable) -> np.ndarray:
+def vector_probe_matrix(table: VectorTable) -> np.ndarray:
     """(probes, 2) weights of (Q_u, Q_v) in each probe's vector."""
     if table.angles is None:
         # no geometry: one probe (or several, each seen as the u direction)
@@ -392,7 +391,7 @@ class _Problem:
         self.model, self.table = model, table
         self.Y = table.vectors[1]
         self.valid = np.isfinite(self.Y)
-        self.P = _probe_matrix(table)
+        self.P = vector_probe_matrix(table)
         self.method = method
         #: w_ref -> the transient runs' grid at that time scale (the Jacobian's columns share it)
         self._profiles: dict[float, _Profile] = {}
@@ -691,7 +690,7 @@ def _eigen(model: SynchronousModel, coef: np.ndarray, W: float) -> tuple[np.ndar
     return lam, np.abs(vec[0] + 1j * vec[1]), np.abs(vec[0] - 1j * vec[1])
 
 
-def _modes(model: SynchronousModel, coef: np.ndarray, W: float) -> tuple[np.ndarray, np.ndarray]:
+def whirl_modes(model: SynchronousModel, coef: np.ndarray, W: float) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues with positive imaginary part and each one's forward share."""
     lam, fwd, bwd = _eigen(model, coef, W)
     keep = lam.imag > 1e-9
@@ -736,7 +735,7 @@ def critical_speeds(model: SynchronousModel, coef: np.ndarray, w_ref: float, spe
     n_branch = None
     vals = []
     for w in grid:
-        lam, _ = _modes(model, coef, w)
+        lam, _ = whirl_modes(model, coef, w)
         if n_branch is None:
             n_branch = len(lam)
         vals.append(lam.imag if len(lam) == n_branch else np.full(n_branch, np.nan))
@@ -745,13 +744,13 @@ def critical_speeds(model: SynchronousModel, coef: np.ndarray, w_ref: float, spe
         f = vals[:, b]
         for k in np.nonzero(np.sign(f[:-1]) * np.sign(f[1:]) < 0)[0]:
             def g(w, b=b):
-                lam, _ = _modes(model, coef, w)
+                lam, _ = whirl_modes(model, coef, w)
                 return lam.imag[b] - w
             try:
                 wc = brentq(g, grid[k], grid[k + 1], xtol=1e-12)
             except ValueError:
                 continue
-            lam, share = _modes(model, coef, wc)
+            lam, share = whirl_modes(model, coef, wc)
             if share[b] < min_forward_share or not (lo * 0.999 <= wc <= hi * 1.001):
                 continue
             out.append({"rpm": wc * w_ref / SPEED_UNITS["rpm"],

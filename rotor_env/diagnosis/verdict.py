@@ -29,21 +29,32 @@ import math
 
 import numpy as np
 
-from .compare import Comparison, _Data, _design, _known
+from .compare import Comparison, WindowData, known_values, model_design
 from .orders import complex_rows, failing_windows, noise_floor, order_map
 
-__all__ = ["FLOOR_RATIO", "NUMERICAL_FLOOR", "VERDICTS", "estimate_noise_floor", "order_lines", "verdict_of"]
+__all__ = ["FLOOR_RATIO", "NUMERICAL_FLOOR", "VERDICTS", "VERDICT_TEXT", "estimate_noise_floor", "order_lines", "verdict_of"]
 
 VERDICTS = ("explained", "explained_after_adding", "partly_explained", "unexplained", "not_identifiable")
+#: The sentence of each verdict (``ratio``: the residual over the noise floor ``floor``).
+VERDICT_TEXT = {
+    "explained": "the starting model explains the data: residual {ratio:.2g}x the noise floor ({floor:.3g})",
+    "explained_after_adding": "explained after adding the missing effects: residual {ratio:.2g}x the noise "
+    "floor ({floor:.3g})",
+    "partly_explained": "effects were added, but the residual still stands at {ratio:.2g}x the noise floor "
+    "({floor:.3g}): something the library does not hold is left",
+    "unexplained": "the residual stands at {ratio:.2g}x the noise floor ({floor:.3g}) and no library effect "
+    "explains it (see the candidates turned down)",
+}
+
 #: a residual within this factor of the noise floor is explained
 FLOOR_RATIO = 1.5
 #: relative numerical floor (integration and round-off) of the equation residual
 NUMERICAL_FLOOR = 1e-6
 
 
-def estimate_noise_floor(data: _Data, comp: Comparison) -> float:
+def estimate_noise_floor(data: WindowData, comp: Comparison) -> float:
     """RMS the (prefiltered) equation residual would have from sensor noise alone."""
-    _, X, y, _, _, _ = _design(data, comp.model, _known(comp.model), comp.onsets, comp.splits, raw=True)
+    _, X, y, _, _, _ = model_design(data, comp.model, known_values(comp.model), comp.onsets, comp.splits, raw=True)
     r = y - X @ comp.coefficients
     k = 2 if data.equation == "both" else 1
     levels = [noise_floor(r[j::k]) for j in range(k)]
@@ -52,7 +63,7 @@ def estimate_noise_floor(data: _Data, comp: Comparison) -> float:
     return max(white * data.noise_gain, numerical)
 
 
-def order_lines(data: _Data, residual: np.ndarray, max_order: float = 4.0, top: int = 6) -> list[dict]:
+def order_lines(data: WindowData, residual: np.ndarray, max_order: float = 4.0, top: int = 6) -> list[dict]:
     """The residual's rotation-order lines: order, whirl direction, share of the excess energy.
 
     The order-tracked power (mean over windows of a few revolutions) is summed over
@@ -92,7 +103,7 @@ def verdict_of(added: bool, ratio: float) -> str:
     return "partly_explained" if added else "unexplained"
 
 
-def describe_unexplained(data: _Data, comp: Comparison, floor: float) -> dict:
+def describe_unexplained(data: WindowData, comp: Comparison, floor: float) -> dict:
     """Orders and bands of a residual that stands above the noise floor."""
     k = 2 if data.equation == "both" else 1
     r = comp.residual
@@ -103,7 +114,7 @@ def describe_unexplained(data: _Data, comp: Comparison, floor: float) -> dict:
     return {"orders": order_lines(data, r), "bands": bands[:6]}
 
 
-def order_by_speed(data: _Data, residual: np.ndarray, order: float, bands: int = 3) -> list[dict]:
+def order_by_speed(data: WindowData, residual: np.ndarray, order: float, bands: int = 3) -> list[dict]:
     """Amplitude of the residual's line at ``order`` (signed: negative is backward) in
     ``bands`` speed bands — how a missing effect scales with speed (a bow's 1x forcing is
     constant, an unbalance's grows with speed squared)."""
@@ -123,7 +134,7 @@ def order_by_speed(data: _Data, residual: np.ndarray, order: float, bands: int =
     return out
 
 
-def lookalike_evidence(data: _Data, base: Comparison, ranked: list, chosen) -> dict:
+def lookalike_evidence(data: WindowData, base: Comparison, ranked: list, chosen) -> dict:
     """Why ``chosen`` and not its lookalikes: the residual's order lines before adding it,
     how its main order scales with speed, and each lookalike's test and rule."""
     from ..effects import EFFECTS
@@ -158,7 +169,7 @@ def lookalike_evidence(data: _Data, base: Comparison, ranked: list, chosen) -> d
     return out
 
 
-def acts_where(data: _Data, base: Comparison, cand) -> dict:
+def acts_where(data: WindowData, base: Comparison, cand) -> dict:
     """Where an effect with a scanned threshold (the rub's clearance) acts, and what the
     misfit it removes looked like there and elsewhere — the evidence against a stiffness
     change (acts at every amplitude) and a quadratic stiffness (grows smoothly with it).
@@ -187,7 +198,7 @@ def acts_where(data: _Data, base: Comparison, cand) -> dict:
     def over(sel) -> float | None:
         return float(np.sqrt(np.mean(per_sample[sel] ** 2)) / floor) if sel.any() and floor > 0 else None
 
-    _, Xb, yb, _, _, _ = _design(data, base.model, _known(base.model), base.onsets, base.splits)
+    _, Xb, yb, _, _, _ = model_design(data, base.model, known_values(base.model), base.onsets, base.splits)
 
     def refit(sel) -> float | None:
         """The starting model refitted to these samples alone: its RMS over the floor."""

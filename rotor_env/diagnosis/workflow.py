@@ -11,12 +11,12 @@ import numpy as np
 from ..effects import EFFECTS, get_effect
 from ..measurements import Measurements
 from ..slow_roll import compensate_slow_roll
-from .candidates import Candidate, _appears_or_changes, _change_time, _rank
+from .candidates import Candidate, appears_or_changes, change_time, rank_candidates
 from .checks import check_candidate
-from .compare import Comparison, _Data, _known, compare, make_robust
+from .compare import Comparison, WindowData, compare, known_values, make_robust
 from .eiv import correct_errors_in_variables
-from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES, Model, _as_model, _validate_columns
-from .orders import _first_rows, failing_windows
+from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES, Model, as_model, validate_columns
+from .orders import failing_windows, first_rows
 from .result import Diagnosis, NotIdentifiableResult
 from .scaling import (
     K_RANGE,
@@ -49,17 +49,17 @@ def fit(
     coefficients corrected for the noise in the regressors (:mod:`.eiv`).  ``onsets``
     makes effects appear mid-run (``{"asymmetry": 250.0}``: a crack opening at t = 250).
     """
-    model = _as_model(model)
+    model = as_model(model)
     onsets = dict(onsets or {})
     for e, tc in onsets.items():
         if e not in model:
             raise ValueError(f"onset given for {e!r}, which is not in the model ({', '.join(model)})")
         if not math.isfinite(tc):
             raise ValueError(f"the onset of {e!r} must be a finite time, got {tc!r}")
-    data = _Data(measurements, ip, equation, window_fraction, t_start)
+    data = WindowData(measurements, ip, equation, window_fraction, t_start)
     for e in model:
-        _validate_columns(EFFECTS[e], data.data, ip)
-    comp = compare(data, model.effects, _known(model.effects), onsets, robust=True, alpha=alpha)
+        validate_columns(EFFECTS[e], data.data, ip)
+    comp = compare(data, model.effects, known_values(model.effects), onsets, robust=True, alpha=alpha)
     return correct_errors_in_variables(data, comp)
 
 
@@ -93,7 +93,7 @@ def diagnose(
         raise ValueError(f"alpha must be in (0, 1), got {alpha!r}")
     if ip is not None and not (math.isfinite(ip) and 0 <= ip < 1):
         raise ValueError(f"ip must be a number in [0, 1), got {float(ip)!r}")
-    model = _as_model(model)
+    model = as_model(model)
     if candidates is None:
         candidates = [c for c in LIBRARY_CANDIDATES if c not in model]
     else:
@@ -108,7 +108,7 @@ def diagnose(
     # a user effect whose columns are broken is said before anything uses them
     samples = np.ascontiguousarray(measurements.data)
     for e in (*model, *candidates):
-        _validate_columns(EFFECTS[e], samples, 0.3 if ip is None else float(ip))
+        validate_columns(EFFECTS[e], samples, 0.3 if ip is None else float(ip))
     try:
         check_excitation(measurements)
         k_hat = estimate_ip_and_stiffness(measurements, model.effects, widest=False).k
@@ -122,7 +122,7 @@ def diagnose(
             notes.append(f"time rescaled by {time_scale:.6g}: the data's natural frequency is "
                          f"{time_scale:.4g} per time unit of the file, the model's is 1")
         # the window and prefilter do not depend on ip: read ip on the data every fit uses
-        data = _Data(measurements, 0.3 if ip is None else float(ip), equation, window_fraction, t_start)
+        data = WindowData(measurements, 0.3 if ip is None else float(ip), equation, window_fraction, t_start)
         check_excitation(data.raw)
         est = estimate_ip_and_stiffness(data.data, model.effects, data.raw_data, data.noise_gain, candidates)
         ip_hat, ip_se = est.ip, est.standard_error
@@ -157,7 +157,7 @@ def diagnose(
         from tqdm.auto import tqdm
 
         pbar = tqdm(total=max_rounds, desc="diagnosing", unit="round", leave=False)
-    current = compare(data, model.effects, _known(model.effects))
+    current = compare(data, model.effects, known_values(model.effects))
     before = current
     floor = estimate_noise_floor(data, before)
     rounds: list[list[Candidate]] = []
@@ -168,7 +168,7 @@ def diagnose(
     while remaining and len(rounds) < max_rounds:
         if floor > 0 and current.rms < floor and not data.noisy:
             break  # noise-free data below the numerical floor: what is left is round-off
-        ranked = _rank(data, current, remaining, _known(current.model), alpha, min_fit_gain, min_energy_drop)
+        ranked = rank_candidates(data, current, remaining, known_values(current.model), alpha, min_fit_gain, min_energy_drop)
         rounds.append(ranked)
         if pbar is not None:
             pbar.update(1)
@@ -181,7 +181,7 @@ def diagnose(
         missing.append(chosen.effect)
         current = chosen.comparison
         if chosen.onset is not None:
-            current = _appears_or_changes(data, current, chosen.effect, alpha, min_energy_drop)
+            current = appears_or_changes(data, current, chosen.effect, alpha, min_energy_drop)
         steps.append(current)
         remaining.remove(chosen.effect)
     if pbar is not None:
@@ -189,7 +189,7 @@ def diagnose(
     onset = {
         e: current.onsets.get(e)
         if e in current.onsets
-        else _change_time(data, current, e, _known(current.model), alpha, min_energy_drop)
+        else change_time(data, current, e, known_values(current.model), alpha, min_energy_drop)
         for e in missing
     }
     for e in missing:
@@ -201,7 +201,7 @@ def diagnose(
     correct_errors_in_variables(data, current)
     floor = estimate_noise_floor(data, current)
     # the first equation's rows: one residual per sample, white where the model is right
-    windows, _ = failing_windows(data.meas.t, _first_rows(before.residual, equation), floor=floor,
+    windows, _ = failing_windows(data.meas.t, first_rows(before.residual, equation), floor=floor,
                                  speed=data.meas.phi_dot)
     ratio = current.rms / floor if floor > 0 else math.inf
     verdict = verdict_of(bool(missing), ratio)

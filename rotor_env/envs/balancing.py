@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from .base import RotorEnvBase, _positive
+from .base import RotorEnvBase, check_positive
 from .core import MODE_BALANCING
 
 __all__ = ["RotorBalancingEnv"]
@@ -162,9 +162,9 @@ class RotorBalancingEnv(RotorEnvBase):
         return_measurements: bool = True,
         faults: Mapping[str, float] | None = None,
     ) -> None:
-        self.spin_rate = _positive("spin_rate", spin_rate)
-        self.m_max = _positive("m_max", m_max)
-        t_max = _positive("t_max", t_max)
+        self.spin_rate = check_positive("spin_rate", spin_rate)
+        self.m_max = check_positive("m_max", m_max)
+        t_max = check_positive("t_max", t_max)
         self._setup(
             render_mode=render_mode,
             randomize=randomize,

@@ -63,7 +63,7 @@ MIN_SUBSTEPS = 10
 N_COLUMNS = len(COLUMNS)
 
 
-def _positive(name: str, value: Any, *, allow_zero: bool = False) -> float:
+def check_positive(name: str, value: Any, *, allow_zero: bool = False) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -117,11 +117,11 @@ class RotorEnvBase(gym.Env[np.ndarray, np.ndarray]):
         self.faults = check_faults(faults)
         self._env_effects = (*ENV_EFFECTS, *(f for f in FAULT_RANGES if f in self.faults))
         _, self._n_coef = coef_layout(self._env_effects)
-        self.clearance = _positive("clearance", clearance)
-        self.t_max = _positive("t_max", t_max)
-        self.step_dt = _positive("step_dt", step_dt)
-        self.sensor_dt = _positive("sensor_dt", sensor_dt)
-        self.max_substep = _positive("max_substep", max_substep)
+        self.clearance = check_positive("clearance", clearance)
+        self.t_max = check_positive("t_max", t_max)
+        self.step_dt = check_positive("step_dt", step_dt)
+        self.sensor_dt = check_positive("sensor_dt", sensor_dt)
+        self.max_substep = check_positive("max_substep", max_substep)
         n_rec = round(self.step_dt / self.sensor_dt)
         if n_rec < 1 or abs(n_rec * self.sensor_dt - self.step_dt) > 1e-9 * self.step_dt:
             raise ValueError(
@@ -137,13 +137,13 @@ class RotorEnvBase(gym.Env[np.ndarray, np.ndarray]):
         self.n_samples = int(n_rec)
         self.substeps_per_step = int(n_rec * every)
         self.max_steps = max(1, math.ceil(self.t_max / self.step_dt - 1e-9))
-        self.w_vibration = _positive("w_vibration", w_vibration, allow_zero=True)
-        self.w_time = _positive("w_time", w_time, allow_zero=True)
-        self.w_effort = _positive("w_effort", w_effort, allow_zero=True)
+        self.w_vibration = check_positive("w_vibration", w_vibration, allow_zero=True)
+        self.w_time = check_positive("w_time", w_time, allow_zero=True)
+        self.w_effort = check_positive("w_effort", w_effort, allow_zero=True)
         worst = self.w_vibration + self.w_time + self.w_effort
         self.fail_penalty = (
             self.max_steps * worst if fail_penalty is None
-            else _positive("fail_penalty", fail_penalty, allow_zero=True)
+            else check_positive("fail_penalty", fail_penalty, allow_zero=True)
         )
         self.return_measurements = bool(return_measurements)
 

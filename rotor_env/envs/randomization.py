@@ -20,20 +20,12 @@ parameter                 distribution         notes
 
 Field faults (``faults={"shaft_bow": 0.3, ...}``: effect -> probability; none by default,
 so the default draws are unchanged) are drawn after the table above, with a second single
-``rng.random`` call, from :data:`FAULT_RANGES`:
-
-==============================  =====================================================
-fault                           parameters
-==============================  =====================================================
-``shaft_bow``                   bow U(0.002, 0.01), phase U(-pi, pi)
-``support_anisotropy``          U(-0.08, 0.08)
-``cross_coupled_stiffness``     U(0, 0.01)  (below the damping: the rotor stays stable)
-``misalignment``                forward 2x U(0, 0.005), phase U(-pi, pi)
-``breathing_crack``             dk U(0.02, 0.1), depth U(0.5, 1), phase U(-pi, pi)
-``rub``                         contact stiffness U(0.2, 1), friction U(0.1, 0.3),
-                                clearance U(0.1, 0.4) (inside the env's clearance 0.6:
-                                the casing is touched before the episode ends on "rub")
-==============================  =====================================================
+``rng.random`` call, from :data:`FAULT_RANGES`: every effect declared with a ``fault_range``
+(its parameters uniform over the declared ranges, listed in docs/EFFECTS.md), in the order
+the effects are registered.  The shaft bow, support anisotropy, cross-coupled stiffness
+(kept below the damping: the rotor stays stable), misalignment, breathing crack and rub
+(clearances inside the env's clearance 0.6: the casing is touched before the episode ends
+on "rub") are declared so.
 
 Absent effects are left out of :attr:`RotorParams.effects` (so ``info["params"]`` says
 which effects the rotor has); the simulation gives them coefficient 0.  The ranges keep
@@ -49,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..effects import DerivedMapping, fault_ranges
 from ..params import RotorParams
 from ..simulator import smooth_effects
 from .core import (
@@ -95,21 +88,14 @@ PRESENCE: dict[str, float] = {
     "nonlinear_stiffness": 0.5,
 }
 _N_DRAWS = len(RANGES) + len(PRESENCE)
-#: the field faults an environment can draw, and their ranges
-FAULT_RANGES: dict[str, tuple[ParamRange, ...]] = {
-    "shaft_bow": (ParamRange("bow", 0.002, 0.01, "shaft_bow"),
-                  ParamRange("bow_phase", -math.pi, math.pi, "shaft_bow")),
-    "support_anisotropy": (ParamRange("support_anisotropy", -0.08, 0.08, "support_anisotropy"),),
-    "cross_coupled_stiffness": (ParamRange("cross_coupling", 0.0, 0.01, "cross_coupled_stiffness"),),
-    "misalignment": (ParamRange("misalignment", 0.0, 0.005, "misalignment"),
-                     ParamRange("misalignment_phase", -math.pi, math.pi, "misalignment")),
-    "breathing_crack": (ParamRange("dk_crack", 0.02, 0.1, "breathing_crack"),
-                        ParamRange("breathing_depth", 0.5, 1.0, "breathing_crack"),
-                        ParamRange("breathing_phase", -math.pi, math.pi, "breathing_crack")),
-    "rub": (ParamRange("rub_stiffness", 0.2, 1.0, "rub"),
-            ParamRange("rub_friction", 0.1, 0.3, "rub"),
-            ParamRange("rub_clearance", 0.1, 0.4, "rub")),
-}
+def _fault_ranges() -> dict[str, tuple[ParamRange, ...]]:
+    return {name: tuple(ParamRange(p, low, high, name) for p, low, high in ranges)
+            for name, ranges in fault_ranges().items()}
+
+
+#: the field faults an environment can draw, and their ranges: each effect's declared
+#: ``fault_range`` (:attr:`rotor_env.effects.Effect.fault_range`), read from the registry when used
+FAULT_RANGES: Mapping[str, tuple[ParamRange, ...]] = DerivedMapping(_fault_ranges)
 
 
 def check_faults(faults: Mapping[str, float] | None) -> dict[str, float]:
@@ -142,13 +128,14 @@ def sample_params(rng: np.random.Generator, faults: Mapping[str, float] | None =
             values[r.name] = v
     effects = tuple(e for e in ENV_EFFECTS if present.get(e, True))
     if faults:
-        names = list(FAULT_RANGES)  # a fixed order: the draw does not depend on the dict's
+        ranges = _fault_ranges()
+        names = list(ranges)  # a fixed order (registration): the draw does not depend on the dict's
         wanted = [f for f in names if f in faults]
-        v = rng.random(len(wanted) + sum(len(FAULT_RANGES[f]) for f in wanted)).tolist()
+        v = rng.random(len(wanted) + sum(len(ranges[f]) for f in wanted)).tolist()
         k = len(wanted)
         for f in wanted:
             here = v[wanted.index(f)] < faults[f]
-            for r in FAULT_RANGES[f]:
+            for r in ranges[f]:
                 if here:
                     values[r.name] = r.low + (r.high - r.low) * v[k]
                 k += 1

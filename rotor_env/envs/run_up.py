@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from .base import RotorEnvBase, _positive
+from .base import RotorEnvBase, check_positive
 from .core import MODE_RUN_UP
 
 __all__ = ["RotorRunUpEnv"]
@@ -190,8 +190,8 @@ class RotorRunUpEnv(RotorEnvBase):
         return_measurements: bool = True,
         faults: Mapping[str, float] | None = None,
     ) -> None:
-        self.target_speed = _positive("target_speed", target_speed)
-        self.a_max = _positive("a_max", a_max)
+        self.target_speed = check_positive("target_speed", target_speed)
+        self.a_max = check_positive("a_max", a_max)
         if deadline is not None and not (deadline >= self.target_speed / self.a_max):
             raise ValueError(
                 f"deadline must be None or >= target_speed / a_max = {self.target_speed / self.a_max:g} "

@@ -6,7 +6,7 @@
 ...         print(event)                        # {"event": "appeared", "effect": "asymmetry", ...}
 >>> mon.save("state.npz"); mon = Monitor.load("state.npz")   # resumes bit for bit
 
-The identifier is the project's :class:`~rotor_env.wrappers.IdentificationCore` (both
+The identifier is the project's :class:`~rotor_env.online.IdentificationCore` (both
 equations, forgetting or a sliding window); the compiled block loop
 (:mod:`rotor_env.monitor.kernel`) selects its rows and updates its factor with the
 core's own functions.  The sequential test and its threshold are derived in
@@ -30,8 +30,8 @@ from identifier.hac import chi2_log10_sf
 from ..effects import EFFECTS
 from ..io import UNIFORM_RTOL, MeasurementError
 from ..measurements import COLUMNS
+from ..online import IdentificationCore
 from ..regression import DEFAULT_EFFECTS, build_rows
-from ..wrappers import IdentificationCore
 from . import kernel as K
 from .detector import CusumDesign
 

@@ -93,13 +93,13 @@ def monitor_streams(sources: list[str], config, *, rig=None, natural_rpm: float 
     """
     import ray
 
-    from ..fleet import _init_ray
+    from ..fleet import init_ray
 
     names = [str(Path(s)) for s in sources]
     if len(set(names)) != len(names):
         dup = sorted({n for n in names if names.count(n) > 1})
         raise ValueError(f"the same stream given twice: {dup}")
-    started = _init_ray(workers, address)
+    started = init_ray(workers, address)
     try:
         remote = ray.remote(num_cpus=1, max_retries=0)(watch_stream)
         gens = {}

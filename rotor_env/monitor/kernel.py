@@ -1,10 +1,10 @@
 """The monitor's compiled block loop (one call per chunk; cached on disk).
 
 Each block of ``B`` samples: noise levels from second differences, the rows of the
-samples that carry information (:func:`rotor_env.wrappers.keep_moving_rows`, the
+samples that carry information (:func:`rotor_env.online.keep_moving_rows`, the
 identification core's selection), the block evidence of every effect against the
 reference before the block (:mod:`rotor_env.monitor.detector`), the CUSUMs, and the
-reference's time update (:func:`identifier._kernels.update_blocks`, the core's
+reference's time update (:func:`identifier.kernels.update_blocks`, the core's
 update).  There is no second copy of the identifier's update loop here.
 """
 
@@ -15,14 +15,14 @@ import math
 import numpy as np
 from numba import njit
 
-from identifier._kernels import (
+from identifier.kernels import (
     clean_factor,
     identifiable_columns,
     nested_coefficients,
     update_blocks,
 )
 
-from ..wrappers import keep_moving_rows
+from ..online import keep_moving_rows
 from .detector import evidence_z
 
 # cfg entries

@@ -31,7 +31,7 @@ length.  The raw columns come from :class:`~.stream.StreamReader` (CSV/Parquet, 
 5. **dimensionless rows**: ``t' = (t - t_0) w_ref`` with ``w_ref = 2 pi N / 60`` from
    ``natural_rpm`` (``t_0`` the first row's time), speed over ``w_ref``, acceleration
    over ``w_ref^2``, translation in :data:`~rotor_env.measurements.waveforms.LENGTH_UNIT`
-   (mm) or tilt in rad; the rates by the stream's Savitzky-Golay ``_Derivatives`` (as
+   (mm) or tilt in rad; the rates by the stream's Savitzky-Golay ``SlidingDerivatives`` (as
    ``derive_rates``).  The first revolution (where the filters start) is left out, and
    at the end of the stream the last one, as in the batch path (a row is handed out once
    the stream is a turn past it).
@@ -56,7 +56,7 @@ from ..measurements.keyphasor import KeyphasorError, KeyphasorTracker
 from ..measurements.probes import probe_matrix
 from ..measurements.rig import SPEED_UNITS, TIME_UNITS, Rig
 from ..measurements.waveforms import LENGTH_UNIT, TARGET_DT
-from .stream import _CHUNK_BYTES, StreamReader, _Derivatives
+from .stream import CHUNK_BYTES, SlidingDerivatives, StreamReader
 
 __all__ = ["DC_GAP_REVOLUTIONS", "RigClock", "RigStream", "natural_rpm_required"]
 
@@ -301,7 +301,7 @@ class RigStream:
     """
 
     def __init__(self, source, rig: Rig, natural_rpm: float, *, follow: bool = False, poll: float = 0.2,
-                 idle_exit: float | None = None, chunk_bytes: int = _CHUNK_BYTES) -> None:
+                 idle_exit: float | None = None, chunk_bytes: int = CHUNK_BYTES) -> None:
         if not (natural_rpm is not None and math.isfinite(natural_rpm) and natural_rpm > 0):
             raise ValueError(f"--natural-rpm must be a positive number of rpm, got {natural_rpm!r}")
         self.rig = rig
@@ -325,7 +325,7 @@ class RigStream:
         self._dt = 0.0  # s
         self._last_t = math.nan
         self._dec: _Decimator | None = None
-        self._deriv: _Derivatives | None = None
+        self._deriv: SlidingDerivatives | None = None
         self._phi_first = math.nan
         self._phi_last = math.nan
         self._tail = np.zeros((0, len(COLUMNS)))  # rows that may still be in the last revolution
@@ -426,7 +426,7 @@ class RigStream:
             dt_model = self._dt * self.w_ref
             self.q = max(1, int(TARGET_DT // dt_model)) if dt_model > 0 else 1
             self._dec = _Decimator(self.q)
-            self._deriv = _Derivatives(_RATES, dt_model * self.q)
+            self._deriv = SlidingDerivatives(_RATES, dt_model * self.q)
         if self._dec is None:
             return np.zeros((0, len(COLUMNS)))
         origin = self._origin.push(t, phi, speed, accel, x, lines, final=final) if (len(t) or final) else None

@@ -37,7 +37,7 @@ from ..measurements import COLUMNS
 
 __all__ = ["StreamReader", "iter_chunks", "read_ahead"]
 
-_CHUNK_BYTES = 1 << 20
+CHUNK_BYTES = 1 << 20
 
 
 class StreamReader:
@@ -51,7 +51,7 @@ class StreamReader:
     """
 
     def __init__(self, source, *, follow: bool = False, poll: float = 0.2, idle_exit: float | None = None,
-                 chunk_bytes: int = _CHUNK_BYTES, required: Sequence[str] = REQUIRED,
+                 chunk_bytes: int = CHUNK_BYTES, required: Sequence[str] = REQUIRED,
                  missing_hint: str | None = None) -> None:
         self.required = tuple(required)
         self.missing_hint = missing_hint
@@ -82,7 +82,7 @@ class StreamReader:
         self._phi_last = math.nan
         self._phi_min = math.inf
         self._phi_max = -math.inf
-        self._deriv: _Derivatives | None = None
+        self._deriv: SlidingDerivatives | None = None
 
     # ------------------------------------------------------------------ chunks
     def __iter__(self) -> Iterator[np.ndarray]:
@@ -323,7 +323,7 @@ class StreamReader:
         out[:, 1] = self._unwrap(out[:, 1], lines)
         self._last_t = float(t[-1])
         if self._deriv is None and any(c not in idx for c in DERIVABLE):
-            self._deriv = _Derivatives([c for c in DERIVABLE if c not in idx], self._dt)
+            self._deriv = SlidingDerivatives([c for c in DERIVABLE if c not in idx], self._dt)
         return out
 
     def _unwrap(self, phi: np.ndarray, lines: np.ndarray) -> np.ndarray:
@@ -349,7 +349,7 @@ class StreamReader:
         return out
 
 
-class _Derivatives:
+class SlidingDerivatives:
     """Savitzky-Golay rates and accelerations on a sliding buffer (as :func:`rotor_env.io.derive_rates`)."""
 
     def __init__(self, names: list[str], dt: float) -> None:

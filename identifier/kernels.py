@@ -1,4 +1,8 @@
-"""Compiled per-sample kernels of the recursive QR estimator.
+"""Compiled per-sample kernels of the recursive QR estimator (a public module).
+
+Used by :class:`identifier.RecursiveQR`, :mod:`identifier.segments`, the on-line
+identification engine (:mod:`rotor_env.online`, behind the Gymnasium wrappers) and the
+monitor's block loop (:mod:`rotor_env.monitor.kernel`): one update, one set of tests.
 
 Everything here works on the augmented upper-triangular factor ``R`` of ``[X y]``
 (shape ``(n+1, n+1)``; the last column holds ``R[:, y]``).  The kernels are written
