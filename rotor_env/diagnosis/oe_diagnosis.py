@@ -212,7 +212,7 @@ def _starts(effect: str, fit: OutputErrorFit) -> list[dict]:
     zero, and several values of each argument (orientations over their period, the rub's
     clearance over the orbit's range)."""
     eff = EFFECTS[effect]
-    base: dict = {e: fit.theta_full[slice(*_slots(e))].copy() for e in fit.effects}
+    base: dict = start_from(fit)
     phys = dict(_NONZERO_START.get(effect, {}))
     args = eff.argument_parameters
     if not args:
@@ -234,16 +234,6 @@ def _starts(effect: str, fit: OutputErrorFit) -> list[dict]:
     return [{**base, effect: {**phys, **small, **c}} for c in combos]
 
 
-_SLOTS: dict = {}
-
-
-def _slots(effect: str):
-    from .output_error import _kernel
-
-    k = _kernel(library_effects())
-    return k.coef_slots[effect]
-
-
 def _fit_candidate(grid, model, effect, base_fit):
     best = None
     starts = _starts(effect, base_fit)
@@ -256,27 +246,15 @@ def _fit_candidate(grid, model, effect, base_fit):
         if best is None or f.rss < best.rss:
             best = f
     if best is not None and len(starts) > 1:
-        st = {e: best.theta_full[slice(*_slots(e))].copy() for e in best.effects}
-        eff = EFFECTS[effect]
-        args = {p.name: best.value(f"{effect}.{p.name}") for p in eff.argument_parameters}
+        # the best start to convergence, its argument values (orientation, clearance) with it
+        args = {p.name: best.value(f"{effect}.{p.name}") for p in EFFECTS[effect].argument_parameters}
         try:
-            full = fit_output_error(grid, (*model, effect), st, x0=best.x0, fixed_args=None,
-                                    max_iter=40) if not args else _refit_with_args(grid, model, effect, best, args)
+            full = fit_output_error(grid, (*model, effect), start_from(best), x0=best.x0, max_iter=40,
+                                    start_args={effect: args})
             best = full if full.rss <= best.rss else best
         except (FloatingPointError, np.linalg.LinAlgError, ValueError):
             pass
     return best
-
-
-def _refit_with_args(grid, model, effect, fit, args):
-    from .output_error import _kernel
-
-    k = _kernel(library_effects())
-    start = {e: fit.theta_full[slice(*k.coef_slots[e])].copy() for e in fit.effects}
-    # the argument values ride in through the kernel's arg vector: pass them as start values
-    fit2 = fit_output_error(grid, (*model, effect), start, x0=fit.x0, max_iter=40,
-                            fixed_args=None, start_args={effect: args})
-    return fit2
 
 
 def _physical_problem(fit: OutputErrorFit, effect: str) -> str:
@@ -300,7 +278,7 @@ def _crack_split(grid: ShootingGrid, fit: OutputErrorFit, effect: str) -> str:
     for part in (order[:half], order[half:]):
         part = np.sort(part)
         sub = replace(grid, segments=grid.segments[part])
-        start = {e: fit.theta_full[slice(*_slots(e))].copy() for e in fit.effects}
+        start = start_from(fit)
         args = {e: {p.name: fit.value(f"{e}.{p.name}") for p in EFFECTS[e].argument_parameters}
                 for e in fit.effects if EFFECTS[e].argument_parameters}
         try:

@@ -81,9 +81,12 @@ from ..effects import EFFECTS, Effect
 __all__ = [
     "OutputErrorFit",
     "ShootingGrid",
+    "coefficient_slice",
+    "equation_error_start",
     "fit_output_error",
     "library_effects",
     "noise_std_high_band",
+    "start_from",
 ]
 
 #: segment length of the multiple shooting, in the model's time unit (about two natural
@@ -305,6 +308,16 @@ def _kernel(effects: tuple[str, ...]) -> _Kernel:
     k = _Kernel(module, effects, coef_slots, arg_slots, j, a)
     _KERNELS[effects] = k
     return k
+
+
+def coefficient_slice(effect: str) -> slice:
+    """Where ``effect``'s coefficients sit in a fit's :attr:`OutputErrorFit.theta_full`."""
+    return slice(*_kernel(library_effects()).coef_slots[effect])
+
+
+def start_from(fit: OutputErrorFit) -> dict[str, np.ndarray]:
+    """A fit's coefficients as the start of another fit (``start`` of :func:`fit_output_error`)."""
+    return {e: fit.theta_full[coefficient_slice(e)].copy() for e in fit.effects}
 
 
 # ------------------------------------------------------------------ the data
