@@ -39,6 +39,7 @@ from .output_error import (
     equation_error_start,
     fit_output_error,
     library_effects,
+    start_from,
 )
 
 __all__ = ["OutputErrorDiagnosis", "diagnose_output_error"]
