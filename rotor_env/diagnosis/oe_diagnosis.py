@@ -55,6 +55,10 @@ CRACK_SPLIT_Z = 4.0
 #: sensitivity): a small start value
 _NONZERO_START = {"rub": {"rub_stiffness": 0.5, "rub_friction": 0.1}}
 MAX_ADDED = 3
+#: screening: Levenberg-Marquardt steps from each start, and how many candidates are then
+#: fitted to convergence
+SCREEN_ITERATIONS = 2
+SCREEN_KEEP = 3
 CRACKS = ("asymmetry", "breathing_crack")
 
 
@@ -89,6 +93,12 @@ class OutputErrorDiagnosis:
     unit: str = ""
     seconds: float = 0.0
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def probe_factor(self) -> float:
+        """Grid residual -> the probes' bandwidth (white noise): probe noise / grid noise."""
+        g = self.before.grid
+        return (g.probe_noise_std / g.noise_std) if g.probe_noise_std else 1.0
 
     @property
     def rms_ratio_before(self) -> float:
@@ -131,7 +141,7 @@ class OutputErrorDiagnosis:
     def to_dict(self) -> dict:
         # residual and floor as the probes see them: the analysis band's RMS scaled to the
         # probes' bandwidth (white noise), so that a model that explains the data reads ~1x
-        s = self.unit_scale * math.sqrt(self.before.grid.decimation)
+        s = self.unit_scale * self.probe_factor
         return {
             "method": "output error (multiple shooting, HAC)",
             "verdict": self.verdict,
@@ -156,7 +166,7 @@ class OutputErrorDiagnosis:
         }
 
     def summary(self) -> str:
-        s, u = self.unit_scale * math.sqrt(self.before.grid.decimation), self.unit
+        s, u = self.unit_scale * self.probe_factor, self.unit
         lines = [f"verdict: {self.verdict} (output error: residual {self.rms_ratio_after:.3g}x the probes' noise "
                  f"floor {self.noise_floor * s:.3g} {u}; starting model {self.rms_ratio_before:.3g}x)",
                  f"model: {', '.join(self.model_before)}"
@@ -235,27 +245,28 @@ def _starts(effect: str, fit: OutputErrorFit) -> list[dict]:
     return [{**base, effect: {**phys, **small, **c}} for c in combos]
 
 
-def _fit_candidate(grid, model, effect, base_fit):
+def _screen(grid, model, effect, base_fit):
+    """The candidate from each of its starts, a few Levenberg-Marquardt steps each: the best."""
     best = None
-    starts = _starts(effect, base_fit)
-    for st in starts:
-        # quick fits from every start, then the best one to convergence
+    for st in _starts(effect, base_fit):
         try:
-            f = fit_output_error(grid, (*model, effect), st, x0=base_fit.x0, max_iter=4 if len(starts) > 1 else 40)
+            f = fit_output_error(grid, (*model, effect), st, x0=base_fit.x0, max_iter=SCREEN_ITERATIONS)
         except (FloatingPointError, np.linalg.LinAlgError, ValueError):
             continue
         if best is None or f.rss < best.rss:
             best = f
-    if best is not None and len(starts) > 1:
-        # the best start to convergence, its argument values (orientation, clearance) with it
-        args = {p.name: best.value(f"{effect}.{p.name}") for p in EFFECTS[effect].argument_parameters}
-        try:
-            full = fit_output_error(grid, (*model, effect), start_from(best), x0=best.x0, max_iter=40,
-                                    start_args={effect: args})
-            best = full if full.rss <= best.rss else best
-        except (FloatingPointError, np.linalg.LinAlgError, ValueError):
-            pass
     return best
+
+
+def _converge(grid, model, effect, screened):
+    """The screened fit to convergence, its argument values (orientation, clearance) with it."""
+    args = {p.name: screened.value(f"{effect}.{p.name}") for p in EFFECTS[effect].argument_parameters}
+    try:
+        full = fit_output_error(grid, (*model, effect), start_from(screened), x0=screened.x0, max_iter=40,
+                                start_args={effect: args})
+    except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+        return screened
+    return full if full.rss <= screened.rss else screened
 
 
 def _physical_problem(fit: OutputErrorFit, effect: str) -> str:
@@ -339,17 +350,32 @@ def diagnose_output_error(
         for c in cands:
             if c in cur_model:
                 continue
-            f = _fit_candidate(grid, cur_model, c, current)
-            say(f"round {rnd}: {c} tried" + (f" (residual {f.rms / floor:.3g}x the floor)" if f else " (diverged)"))
+            f = _screen(grid, cur_model, c, current)
+            say(f"round {rnd}: {c} screened" + (f" (residual {f.rms / floor:.3g}x the floor)" if f else " (diverged)"))
             if f is not None:
                 fits[c] = f
+        # every candidate screened by a few steps from each start; the best few (by the
+        # information criterion below) fitted to convergence, the rub always when a crack is
+        # among them (the crack_not_rub rule compares the two)
+        ranked = sorted(fits, key=lambda c: fits[c].rss / (floor * floor) + len(fits[c].values)
+                        * math.log(fits[c].n_rows))
+        keep = ranked[:SCREEN_KEEP]
+        if any(c in CRACKS for c in keep) and "rub" in fits and "rub" not in keep:
+            keep.append("rub")
+        for c in keep:
+            fits[c] = _converge(grid, cur_model, c, fits[c])
+            say(f"round {rnd}: {c} fitted (residual {fits[c].rms / floor:.3g}x the floor)")
         n = max(len(fits), 1)
         round_rows = []
         for c, f in fits.items():
             _, _, lp = f.wald(c)
             relevance = (current.rss - f.rss) / excess
             reason = ""
-            if not lp < math.log10(alpha / n):
+            if c not in keep:
+                reason = (f"screened out: after {SCREEN_ITERATIONS} steps from each start it removes "
+                          f"{100 * relevance:.1f} % of the residual above the floor, less than the "
+                          f"{SCREEN_KEEP} best of the round")
+            elif not lp < math.log10(alpha / n):
                 reason = f"not significant (log10 p = {lp:.3g}, Bonferroni level {math.log10(alpha / n):.3g})"
             elif relevance < RELEVANT_SHARE:
                 reason = f"significant, not relevant: removes {100 * relevance:.1f} % of the residual above the floor"
@@ -416,7 +442,7 @@ def plot_residual(diag: OutputErrorDiagnosis, speed_scale: float = 1.0, speed_un
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7.5, 3.6))
-    s = diag.unit_scale * math.sqrt(diag.before.grid.decimation)
+    s = diag.unit_scale * diag.probe_factor
     for fit, label, style in ((diag.before, "starting model", "-"), (diag.after, "final model", "-")):
         sp, rms = _segment_speed_and_rms(fit)
         ax.plot(sp * speed_scale, rms * s, style, label=label)

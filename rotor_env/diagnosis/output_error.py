@@ -73,6 +73,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from identifier.hac import andrews_bandwidth, chi2_log10_sf, long_run_covariance
 
@@ -94,9 +95,9 @@ __all__ = [
 SEGMENT_LENGTH = 12.0
 #: model time step of the shooting grid aimed at (RK4 per sample; the record is low-pass
 #: decimated to it when finer)
-GRID_DT = 0.08
+GRID_DT = 0.12
 #: at least this many samples per revolution at the top speed on the shooting grid
-GRID_PER_TURN = 32
+GRID_PER_TURN = 24
 #: forward-difference step for A = df/dx (relative to 1 + |x|) and for the arguments
 _FD_STATE = 1e-7
 _FD_ARG = 1e-6
@@ -339,6 +340,8 @@ class ShootingGrid:
     ip: float
     noise_std: float | None = None
     decimation: int = 1
+    #: the probes' noise per sample of the record the grid was decimated from
+    probe_noise_std: float | None = None
 
     @classmethod
     def from_arrays(cls, t, phi, phid, th_x, th_y, ip: float, *, noise_std: float | None = None,
@@ -377,8 +380,16 @@ class ShootingGrid:
         # each sample in one segment: a segment ends one sample before the next one starts
         ends = np.append(starts[1:] - 1, len(t) - 1)
         seg = np.column_stack([starts, ends]).astype(np.int64)
-        sigma = None if noise_std is None else float(noise_std) / math.sqrt(q)
-        return cls(t, np.asarray(phi, float), np.asarray(phid, float), y, rates, seg, float(ip), sigma, q)
+        # white noise through scipy's decimating FIR (firwin(20 q + 1, 1/q), Hamming): its
+        # variance times the filter's sum of squared taps (0.964 / q, not 1 / q)
+        gain = 1.0
+        if q > 1:
+            from scipy.signal import firwin
+
+            gain = float(np.sum(firwin(20 * q + 1, 1.0 / q, window="hamming") ** 2))
+        sigma = None if noise_std is None else float(noise_std) * math.sqrt(gain)
+        return cls(t, np.asarray(phi, float), np.asarray(phid, float), y, rates, seg, float(ip), sigma, q,
+                   None if noise_std is None else float(noise_std))
 
     @property
     def n(self) -> int:
@@ -481,6 +492,48 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi):
     return status, pred, jac
 
 
+@njit(cache=True)
+def _reduced_normal_equations(r, jac, seg, npq):
+    """Variable projection in normal-equation form: per segment ``G = Jx'Jx``,
+    ``C = Jx'Jp``, ``c = Jx'r``; the reduced ``H = sum Jp'Jp - C'G^-1 C`` and
+    ``g = sum Jp'r - C'G^-1 c``; ``Gi_C``, ``Gi_c`` give the start states' step
+    ``dx0_s = Gi_c - Gi_C d`` for a parameter step ``d``."""
+    ns = seg.shape[0]
+    H = np.zeros((npq, npq))
+    g = np.zeros(npq)
+    GiC = np.zeros((ns, 4, npq))
+    Gic = np.zeros((ns, 4))
+    nf = jac.shape[2]
+    for s in range(ns):
+        G = np.zeros((4, 4))
+        C = np.zeros((4, npq))
+        c = np.zeros(4)
+        for k in range(seg[s, 0], seg[s, 1] + 1):
+            for ch in range(2):
+                rk = r[k, ch]
+                for a in range(4):
+                    ja = jac[k, ch, npq + a]
+                    c[a] += ja * rk
+                    for b in range(4):
+                        G[a, b] += ja * jac[k, ch, npq + b]
+                    for b in range(npq):
+                        C[a, b] += ja * jac[k, ch, b]
+                for a in range(npq):
+                    ja = jac[k, ch, a]
+                    g[a] += ja * rk
+                    for b in range(a, npq):
+                        H[a, b] += ja * jac[k, ch, b]
+        Gi = np.linalg.pinv(G)
+        GiC[s] = Gi @ C
+        Gic[s] = Gi @ c
+        H -= C.T @ GiC[s]
+        g -= C.T @ Gic[s]
+    for a in range(npq):
+        for b in range(a):
+            H[a, b] = H[b, a]
+    return H, g, GiC, Gic, nf
+
+
 def _project(grid, r, jac, npq):
     """Variable projection: each segment's rows on the complement of its start-state columns."""
     rows_r, rows_j, bases = [], [], []
@@ -564,12 +617,11 @@ def fit_output_error(
     v = pack()
     while it < max_iter:
         it += 1
-        rt, Jt, bases = _project(grid, r, jac, npq)
-        scale = np.sqrt(np.sum(Jt * Jt, axis=0))
+        H, gr, GiC, Gic, _ = _reduced_normal_equations(r, jac, grid.segments, npq)
+        scale = np.sqrt(np.maximum(np.diag(H), 0.0))
         scale[scale == 0] = 1.0
-        Js = Jt / scale
-        JtJ = Js.T @ Js
-        g = Js.T @ rt
+        JtJ = H / np.outer(scale, scale)
+        g = gr / scale
         improved = False
         for _ in range(12):
             try:
@@ -579,9 +631,7 @@ def fit_output_error(
                 continue
             v_new = v + d
             th_new, ar_new = unpack(v_new)
-            x0_new = x0.copy()
-            for s, (Jx, rs, Jsg) in enumerate(bases):
-                x0_new[s] += np.linalg.lstsq(Jx, rs - Jsg @ d, rcond=None)[0]
+            x0_new = x0 + Gic - GiC @ d
             st, p_new, j_new = _shoot(kernel, grid, x0_new, th_new, ar_new, active, pidx, qidx, qlo, qhi)
             r_new = grid.y - p_new
             with np.errstate(over="ignore", invalid="ignore"):  # a trial step that blew up is refused
