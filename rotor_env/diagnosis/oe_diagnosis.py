@@ -417,6 +417,19 @@ def diagnose_output_error(
         tried.extend(round_rows)
         if chosen is None:
             break
+        # what these data cannot decide: another fitted candidate whose residual energy is
+        # within two standard deviations of a chi-square's (2/N relative) of the chosen one's
+        best_rss = fits[chosen.effect].rss
+        tol = 2.0 * math.sqrt(2.0 / fits[chosen.effect].n_rows)
+        for r in round_rows:
+            if r is chosen or r.effect not in keep or r.reason.startswith("not significant"):
+                continue
+            if fits[r.effect].rss <= best_rss * (1.0 + tol):
+                notes.append(f"round {rnd}: {r.effect} fits these data as well as {chosen.effect} (residual "
+                             f"{fits[r.effect].rms / floor:.4g}x vs {fits[chosen.effect].rms / floor:.4g}x the floor): "
+                             f"the data cannot tell them apart; {chosen.effect} is named "
+                             + ("as the simpler (fewer parameters)" if len(fits[r.effect].values)
+                                > len(fits[chosen.effect].values) else "by the information criterion"))
         added.append(chosen.effect)
         cur_model = (*cur_model, chosen.effect)
         current = fits[chosen.effect]
