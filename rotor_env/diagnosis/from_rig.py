@@ -94,15 +94,19 @@ class RigDiagnosis:
 
     def summary(self) -> str:
         lines = [f"rig recording {self.record.source} ({self.record.rig.model}, "
-                 f"{self.record.rpm.min():.0f}-{self.record.rpm.max():.0f} rpm)"]
+                 f"{self.record.rpm.min():.0f}-{self.record.rpm.max():.0f} rpm)",
+                 f"VERDICT: {self.verdict}" + (f" -- missing: {', '.join(self.diagnosis.missing)}"
+                                               if self.diagnosis.missing else "")
+                 + " (one conclusion for the record: the waveforms' model holds every sample; the 1X "
+                 "vectors below are a part of it)"]
         for c in self.vectors.to_dict()["criticals"]:
             lines.append(f"critical speed {c['rpm']:.1f} rpm, damping ratio {c['damping_ratio']:.4f}")
         lines.append(f"time unit of the model: 1/{self.w_ref:.6g} s (natural frequency "
                      f"{self.w_ref / SPEED_UNITS['rpm']:.1f} rpm)")
         lines.append("")
-        lines.append("1X vectors: " + self.vectors.summary().replace("\n", "\n  "))
+        lines.append("waveforms (output error): " + self.diagnosis.summary().replace("\n", "\n  "))
         lines.append("")
-        lines.append("waveforms: " + self.diagnosis.summary().replace("\n", "\n  "))
+        lines.append("part: 1X vectors: " + self.vectors.summary().replace("\n", "\n  "))
         return "\n".join(lines)
 
     def report(self, path, *, overwrite: bool = False):
