@@ -434,6 +434,14 @@ def diagnose_output_error(
         cur_model = (*cur_model, chosen.effect)
         current = fits[chosen.effect]
         say(f"round {rnd}: {chosen.effect} added: residual {current.rms / floor:.3g}x the noise floor")
+    # what the data cannot decide: a library effect declared a lookalike of one in the final
+    # model and not added may hide in that effect's value
+    for e in cur_model:
+        hidden = [c for c in cands if c not in cur_model and e in EFFECTS[c].lookalikes]
+        if hidden:
+            notes.append(f"{e}'s value may also carry {', '.join(hidden)} (declared lookalike"
+                         f"{'s' if len(hidden) > 1 else ''}): on this record the output error did not need "
+                         f"{'them' if len(hidden) > 1 else 'it'}, which does not prove absence")
     return OutputErrorDiagnosis(tuple(model), cur_model, base, current, floor, tried, added, unit_scale, unit,
                                 time.perf_counter() - t_start, notes)
 
