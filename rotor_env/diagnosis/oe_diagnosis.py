@@ -434,14 +434,16 @@ def diagnose_output_error(
         cur_model = (*cur_model, chosen.effect)
         current = fits[chosen.effect]
         say(f"round {rnd}: {chosen.effect} added: residual {current.rms / floor:.3g}x the noise floor")
-    # what the data cannot decide: a library effect declared a lookalike of one in the final
-    # model and not added may hide in that effect's value
-    for e in cur_model:
-        hidden = [c for c in cands if c not in cur_model and e in EFFECTS[c].lookalikes]
-        if hidden:
-            notes.append(f"{e}'s value may also carry {', '.join(hidden)} (declared lookalike"
-                         f"{'s' if len(hidden) > 1 else ''}): on this record the output error did not need "
-                         f"{'them' if len(hidden) > 1 else 'it'}, which does not prove absence")
+    # what the data cannot decide: through one critical the whirl runs at about the natural
+    # frequency, where a cross-coupled stiffness q acts exactly as a damping -q/w: the
+    # fitted damping is c - q, whichever of the two the rotor has
+    if "viscous_damping" in cur_model and "cross_coupled_stiffness" in cands \
+            and "cross_coupled_stiffness" not in cur_model:
+        c = current.parameters("viscous_damping").get("c", math.nan)
+        notes.append(f"the damping c = {c:.4g} may be a smaller damping plus a destabilising cross-coupled "
+                     "stiffness (c - q at the natural frequency): a run through one critical cannot separate "
+                     "them; a record whose whirl frequency moves (a second critical, a free whirl at another "
+                     "speed) can")
     return OutputErrorDiagnosis(tuple(model), cur_model, base, current, floor, tried, added, unit_scale, unit,
                                 time.perf_counter() - t_start, notes)
 
