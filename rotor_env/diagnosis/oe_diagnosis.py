@@ -46,6 +46,10 @@ __all__ = ["OutputErrorDiagnosis", "diagnose_output_error"]
 
 #: residual RMS within this factor of the noise floor: explained
 EXPLAINED_RATIO = 1.1
+#: the search goes on while the residual stands above this factor of the floor: on tens of
+#: thousands of samples a 3 % excess is far outside the noise energy's own scatter
+#: (sqrt(2/N) < 1 %), and a small effect (a weak non-linearity) leaves no more
+SEARCH_RATIO = 1.02
 #: a candidate must remove this share of the residual energy above the floor
 RELEVANT_SHARE = 0.1
 #: crack vs rub: the asymmetry of the low- and high-amplitude halves may differ by this
@@ -343,7 +347,7 @@ def diagnose_output_error(
     tried: list[Candidate] = []
     crack_amp_cache: dict = {}
     for rnd in range(1, MAX_ADDED + 1):
-        if current.rms / floor <= EXPLAINED_RATIO:
+        if current.rms / floor <= SEARCH_RATIO:
             break
         excess = max(current.rss - floor * floor * current.n_rows, 1e-300)
         fits = {}
@@ -417,14 +421,17 @@ def diagnose_output_error(
         tried.extend(round_rows)
         if chosen is None:
             break
-        # what these data cannot decide: another fitted candidate whose residual energy is
-        # within two standard deviations of a chi-square's (2/N relative) of the chosen one's
+        # what these data cannot decide: another fitted candidate whose residual energy exceeds
+        # the chosen one's by less than the 99 % point of a chi-square with its parameter count
+        # (in units of the noise variance; both fits see the same noise, so it cancels)
+        from scipy.stats import chi2
+
         best_rss = fits[chosen.effect].rss
-        tol = 2.0 * math.sqrt(2.0 / fits[chosen.effect].n_rows)
         for r in round_rows:
             if r is chosen or r.effect not in keep or r.reason.startswith("not significant"):
                 continue
-            if fits[r.effect].rss <= best_rss * (1.0 + tol):
+            gap = (fits[r.effect].rss - best_rss) / (floor * floor)
+            if gap <= chi2.ppf(0.99, len(fits[r.effect].values)):
                 notes.append(f"round {rnd}: {r.effect} fits these data as well as {chosen.effect} (residual "
                              f"{fits[r.effect].rms / floor:.4g}x vs {fits[chosen.effect].rms / floor:.4g}x the floor): "
                              f"the data cannot tell them apart; {chosen.effect} is named "
