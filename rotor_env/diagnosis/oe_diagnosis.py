@@ -227,11 +227,13 @@ def _starts(effect: str, fit: OutputErrorFit) -> list[dict]:
     zero, and several values of each argument (orientations over their period, the rub's
     clearance over the orbit's range)."""
     eff = EFFECTS[effect]
-    base: dict = start_from(fit)
+    base: dict = {}  # the model's own effects start where ``fit`` ended (``previous``)
     phys = dict(_NONZERO_START.get(effect, {}))
     args = eff.argument_parameters
     if not args:
-        return [{**base, effect: phys}]
+        # a coefficient start of zero: the first Gauss-Newton step is then the linearised
+        # least-squares estimate (a default-sized start can be far off and stall)
+        return [{**base, effect: np.zeros(len(eff.coefficients)) if not phys else phys}]
     r = np.hypot(fit.grid.y[:, 0], fit.grid.y[:, 1])
     grids = []
     for p in args:
@@ -249,12 +251,47 @@ def _starts(effect: str, fit: OutputErrorFit) -> list[dict]:
     return [{**base, effect: {**phys, **small, **c}} for c in combos]
 
 
+def _half_turn_orientation(effect: str):
+    """The effect's one orientation when its moment turns as ``e^{-2i axis}`` (period pi) and it
+    has one coefficient and no other argument: then ``D e^{-2i axis}`` is linear in
+    ``(D cos 2 axis, D sin 2 axis)``."""
+    eff = EFFECTS[effect]
+    args = eff.argument_parameters
+    if len(eff.coefficients) == 1 and len(args) == 1 and args[0].orientation \
+            and abs(args[0].angle_period - math.pi) < 1e-9:
+        return args[0]
+    return None
+
+
 def _screen(grid, model, effect, base_fit):
-    """The candidate from each of its starts, a few Levenberg-Marquardt steps each: the best."""
+    """The candidate from each of its starts, a few Levenberg-Marquardt steps each: the best.
+
+    A half-turn orientation (a crack's axis, the supports' axis) is not searched from
+    starts: the moment is linear in ``D cos 2a`` and ``D sin 2a``, whose columns (the axis at
+    0 and at 45 deg) are in quadrature over the record — one step from zero at each gives
+    both components, hence the start ``D, a``."""
     best = None
-    for st in _starts(effect, base_fit):
+    p = _half_turn_orientation(effect)
+    starts = _starts(effect, base_fit)
+    if p is not None:
+        base = {}
+        comps = []
+        for axis in (0.0, math.pi / 4):
+            try:
+                f = fit_output_error(grid, (*model, effect), {**base, effect: np.zeros(1)}, previous=base_fit,
+                                     fixed_args={effect: {p.name: axis}}, max_iter=SCREEN_ITERATIONS)
+            except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+                comps = []
+                break
+            comps.append(f.value(f"{effect}.{EFFECTS[effect].coefficients[0]}"))
+        if comps:
+            D = math.hypot(*comps)
+            axis = 0.5 * math.atan2(comps[1], comps[0])
+            name = EFFECTS[effect].parameters[0].name
+            starts = [{**base, effect: {name: D, p.name: axis}}]
+    for st in starts:
         try:
-            f = fit_output_error(grid, (*model, effect), st, x0=base_fit.x0, max_iter=SCREEN_ITERATIONS)
+            f = fit_output_error(grid, (*model, effect), st, previous=base_fit, max_iter=SCREEN_ITERATIONS)
         except (FloatingPointError, np.linalg.LinAlgError, ValueError):
             continue
         if best is None or f.rss < best.rss:
@@ -264,10 +301,8 @@ def _screen(grid, model, effect, base_fit):
 
 def _converge(grid, model, effect, screened):
     """The screened fit to convergence, its argument values (orientation, clearance) with it."""
-    args = {p.name: screened.value(f"{effect}.{p.name}") for p in EFFECTS[effect].argument_parameters}
     try:
-        full = fit_output_error(grid, (*model, effect), start_from(screened), x0=screened.x0, max_iter=40,
-                                start_args={effect: args})
+        full = fit_output_error(grid, (*model, effect), {}, previous=screened, max_iter=40)
     except (FloatingPointError, np.linalg.LinAlgError, ValueError):
         return screened
     return full if full.rss <= screened.rss else screened

@@ -98,6 +98,8 @@ SEGMENT_LENGTH = 12.0
 GRID_DT = 0.12
 #: at least this many samples per revolution at the top speed on the shooting grid
 GRID_PER_TURN = 24
+#: output offsets fitted with every model (nuisance parameters: the probes' static gap)
+N_OFFSETS = 2
 #: forward-difference step for A = df/dx (relative to 1 + |x|) and for the arguments
 _FD_STATE = 1e-7
 _FD_ARG = 1e-6
@@ -175,7 +177,7 @@ def rhs(ph, pd, pdd, x, S, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx,
 
 
 @njit(cache=True)
-def shoot(t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, qlo, qhi, ip, pred, jac):
+def shoot(t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, qlo, qhi, ip, nsub, pred, jac):
     ncol = theta.shape[0]
     cy = np.zeros(ncol)
     cx = np.zeros(ncol)
@@ -211,39 +213,45 @@ def shoot(t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, qlo, qhi, ip, p
             jac[i0, 0, c] = S[0, c]
             jac[i0, 1, c] = S[1, c]
         for k in range(i0, i1):
-            dt = t[k + 1] - t[k]
-            a = (phid[k + 1] - phid[k]) / dt
-            p0 = phi[k]
-            w0 = phid[k]
-            rhs(p0, w0, a, x, S, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k1, K1)
-            hh = 0.5 * dt
-            for q in range(4):
-                xs[q] = x[q] + hh * k1[q]
-            for q in range(4):
-                for c in range(nf):
-                    Ss[q, c] = S[q, c] + hh * K1[q, c]
-            pm = p0 + w0 * hh + 0.5 * a * hh * hh
-            wm = w0 + a * hh
-            rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k2, K2)
-            for q in range(4):
-                xs[q] = x[q] + hh * k2[q]
-            for q in range(4):
-                for c in range(nf):
-                    Ss[q, c] = S[q, c] + hh * K2[q, c]
-            rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k3, K3)
-            for q in range(4):
-                xs[q] = x[q] + dt * k3[q]
-            for q in range(4):
-                for c in range(nf):
-                    Ss[q, c] = S[q, c] + dt * K3[q, c]
-            pe = p0 + w0 * dt + 0.5 * a * dt * dt
-            we = w0 + a * dt
-            rhs(pe, we, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k4, K4)
-            for q in range(4):
-                x[q] += dt / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
-            for q in range(4):
-                for c in range(nf):
-                    S[q, c] += dt / 6.0 * (K1[q, c] + 2.0 * K2[q, c] + 2.0 * K3[q, c] + K4[q, c])
+            dts = t[k + 1] - t[k]
+            a = (phid[k + 1] - phid[k]) / dts
+            dt = dts / nsub
+            for m in range(nsub):
+                tau0 = m * dt
+                p0 = phi[k] + phid[k] * tau0 + 0.5 * a * tau0 * tau0
+                w0 = phid[k] + a * tau0
+                rhs(p0, w0, a, x, S, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k1, K1)
+                hh = 0.5 * dt
+                for q in range(4):
+                    xs[q] = x[q] + hh * k1[q]
+                for q in range(4):
+                    for c in range(nf):
+                        Ss[q, c] = S[q, c] + hh * K1[q, c]
+                pm = p0 + w0 * hh + 0.5 * a * hh * hh
+                wm = w0 + a * hh
+                rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
+                    k2, K2)
+                for q in range(4):
+                    xs[q] = x[q] + hh * k2[q]
+                for q in range(4):
+                    for c in range(nf):
+                        Ss[q, c] = S[q, c] + hh * K2[q, c]
+                rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
+                    k3, K3)
+                for q in range(4):
+                    xs[q] = x[q] + dt * k3[q]
+                for q in range(4):
+                    for c in range(nf):
+                        Ss[q, c] = S[q, c] + dt * K3[q, c]
+                pe = p0 + w0 * dt + 0.5 * a * dt * dt
+                we = w0 + a * dt
+                rhs(pe, we, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
+                    k4, K4)
+                for q in range(4):
+                    x[q] += dt / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
+                for q in range(4):
+                    for c in range(nf):
+                        S[q, c] += dt / 6.0 * (K1[q, c] + 2.0 * K2[q, c] + 2.0 * K3[q, c] + K4[q, c])
             if not (abs(x[0]) < DIVERGED and abs(x[1]) < DIVERGED and abs(x[2]) < DIVERGED
                     and abs(x[3]) < DIVERGED):
                 return k + 1
@@ -311,6 +319,16 @@ def _kernel(effects: tuple[str, ...]) -> _Kernel:
     return k
 
 
+def decimation_filter(q: int) -> np.ndarray:
+    """The low-pass FIR of the decimation by ``q``: Kaiser window (beta 12, about 1e-6 ripple
+    and -100 dB), cut at 0.8 of the new Nyquist, 64 q + 1 taps, unit gain at DC.  A record
+    whose response is thousands of times its noise needs a pass band flat to 1e-5 (scipy's
+    default Hamming FIR ripples by 1e-3 near its cut)."""
+    from scipy.signal import firwin
+
+    return firwin(64 * q + 1, 0.8 / q, window=("kaiser", 12.0))
+
+
 def coefficient_slice(effect: str) -> slice:
     """Where ``effect``'s coefficients sit in a fit's :attr:`OutputErrorFit.theta_full`."""
     return slice(*_kernel(library_effects()).coef_slots[effect])
@@ -342,27 +360,31 @@ class ShootingGrid:
     decimation: int = 1
     #: the probes' noise per sample of the record the grid was decimated from
     probe_noise_std: float | None = None
+    #: RK4 steps per grid sample (more where the response is many times the noise)
+    substeps: int = 1
 
     @classmethod
     def from_arrays(cls, t, phi, phid, th_x, th_y, ip: float, *, noise_std: float | None = None,
                     segment_length: float = SEGMENT_LENGTH, grid_dt: float | None = None) -> ShootingGrid:
         """Decimate (zero-phase FIR) to the grid step and cut the segments."""
-        from scipy.signal import decimate, savgol_filter
+        from scipy.signal import resample_poly, savgol_filter
 
         t = np.asarray(t, float)
         dt0 = float(np.median(np.diff(t)))
         top = float(np.max(np.abs(phid)))
         target = grid_dt if grid_dt is not None else min(GRID_DT, 2 * math.pi / (GRID_PER_TURN * max(top, 1e-9)))
         q = max(1, int(target // dt0))
+        taps = None
         if q > 1:
-            thx = decimate(np.asarray(th_x, float), q, ftype="fir", zero_phase=True)
-            thy = decimate(np.asarray(th_y, float), q, ftype="fir", zero_phase=True)
+            taps = decimation_filter(q)
+            thx = resample_poly(np.asarray(th_x, float), 1, q, window=taps)
+            thy = resample_poly(np.asarray(th_y, float), 1, q, window=taps)
             sel = slice(None, None, q)
             t, phi, phid = t[sel], np.asarray(phi, float)[sel], np.asarray(phid, float)[sel]
             n = min(len(t), len(thx))
             t, phi, phid, thx, thy = t[:n], phi[:n], phid[:n], thx[:n], thy[:n]
-            # the FIR filter rings at the ends: half a segment off each end
-            cut = max(1, int(round(0.5 * segment_length / (dt0 * q))))
+            # the filter rings at the ends: its half length (and at least half a segment) off each end
+            cut = max(len(taps) // (2 * q) + 1, int(round(0.5 * segment_length / (dt0 * q))))
             if n > 6 * cut:
                 keep = slice(cut, n - cut)
                 t, phi, phid, thx, thy = t[keep], phi[keep], phid[keep], thx[keep], thy[keep]
@@ -380,16 +402,20 @@ class ShootingGrid:
         # each sample in one segment: a segment ends one sample before the next one starts
         ends = np.append(starts[1:] - 1, len(t) - 1)
         seg = np.column_stack([starts, ends]).astype(np.int64)
-        # white noise through scipy's decimating FIR (firwin(20 q + 1, 1/q), Hamming): its
-        # variance times the filter's sum of squared taps (0.964 / q, not 1 / q)
-        gain = 1.0
-        if q > 1:
-            from scipy.signal import firwin
-
-            gain = float(np.sum(firwin(20 * q + 1, 1.0 / q, window="hamming") ** 2))
+        # white noise through the decimating FIR: its variance times the sum of squared taps
+        gain = 1.0 if taps is None else float(np.sum(taps * taps))
         sigma = None if noise_std is None else float(noise_std) * math.sqrt(gain)
+        # RK4's phase error over a segment, omega T (omega dt)^4 / 120 relative, kept below a
+        # tenth of the noise-to-response ratio (a clean tilt rig needs 1e-4: two substeps)
+        amp = float(np.max(np.hypot(y[:, 0], y[:, 1]))) if len(y) else 0.0
+        omega = max(top, 1.2) * 1.5
+        nsub = 1
+        if sigma is not None and amp > 0:
+            want = 0.1 * sigma / amp
+            while nsub < 8 and omega * segment_length * (omega * dt / nsub) ** 4 / 120.0 > want:
+                nsub += 1
         return cls(t, np.asarray(phi, float), np.asarray(phid, float), y, rates, seg, float(ip), sigma, q,
-                   None if noise_std is None else float(noise_std))
+                   None if noise_std is None else float(noise_std), nsub)
 
     @property
     def n(self) -> int:
@@ -420,6 +446,9 @@ class OutputErrorFit:
     grid: ShootingGrid = field(repr=False)
     theta_full: np.ndarray = field(repr=False, default=None)
     arg_full: np.ndarray = field(repr=False, default=None)
+    #: the probes' static offsets (th_x, th_y): the gap voltage's mean removed from a signal
+    #: whose response has a mean of its own leaves one
+    offset: np.ndarray = field(repr=False, default=None)
 
     @property
     def n_rows(self) -> int:
@@ -483,12 +512,19 @@ def _free_layout(kernel: _Kernel, effects: Sequence[str], fixed_args: Mapping[st
     return as_int(pidx), as_int(qidx), as_int(qlo), as_int(qhi), tuple(names), tuple(owners)
 
 
-def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi):
-    nf = len(pidx) + len(qidx) + 4
+def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset):
+    """Predictions and Jacobian columns: coefficients, arguments, the two output offsets,
+    then the segment's start state."""
+    npar = len(pidx) + len(qidx)
+    nf = npar + N_OFFSETS + 4
     pred = np.empty((grid.n, 2))
     jac = np.empty((grid.n, 2, nf))
+    # the kernel leaves the offsets' columns at zero (no state depends on them)
     status = kernel.module.shoot(grid.t, grid.phi, grid.phid, grid.segments, x0, theta, arg, active,
-                                 pidx, qidx, qlo, qhi, grid.ip, pred, jac)
+                                 pidx, qidx, qlo, qhi, grid.ip, grid.substeps, pred, jac)
+    pred += offset
+    jac[:, 0, npar] = 1.0
+    jac[:, 1, npar + 1] = 1.0
     return status, pred, jac
 
 
@@ -556,6 +592,7 @@ def fit_output_error(
     fixed_args: Mapping[str, Mapping[str, float]] | None = None,
     x0: np.ndarray | None = None,
     start_args: Mapping[str, Mapping[str, float]] | None = None,
+    previous: OutputErrorFit | None = None,
     max_iter: int = 40,
     tol: float = 1e-8,
 ) -> OutputErrorFit:
@@ -565,7 +602,9 @@ def fit_output_error(
     data is itself an estimate); ``start``: physical parameter values per effect (the
     declaration's defaults where absent, 0 for a coefficient whose effect has no start);
     ``fixed_args``: argument parameters held at a value (not fitted); ``start_args``:
-    argument start values (with ``start`` given as coefficient arrays).
+    argument start values (with ``start`` given as coefficient arrays); ``previous``: a fit
+    whose effects' coefficients, arguments and start states seed this one (a model grown
+    by one effect starts where the smaller one ended).
     """
     effects = tuple(dict.fromkeys(("stiffness", *effects)))
     lib = library_effects()
@@ -593,20 +632,33 @@ def fit_output_error(
         given = {**(start.get(e, {}) if not isinstance(start.get(e), np.ndarray) else {}),
                  **(start_args or {}).get(e, {}), **fixed_args.get(e, {})}
         arg[alo:ahi] = [float(given.get(p.name, p.default)) for p in eff.argument_parameters]
+    if previous is not None:
+        for e in previous.effects:
+            if e in effects and e not in start:
+                theta[slice(*kernel.coef_slots[e])] = previous.theta_full[slice(*kernel.coef_slots[e])]
+                lo, hi = kernel.arg_slots[e]
+                for q, p in enumerate(EFFECTS[e].argument_parameters):
+                    if p.name not in fixed_args.get(e, {}) and p.name not in (start_args or {}).get(e, {}):
+                        arg[lo + q] = previous.arg_full[lo + q]
+        if x0 is None and len(previous.x0) == len(grid.segments):
+            x0 = previous.x0
     pidx, qidx, qlo, qhi, names, owners = _free_layout(kernel, effects, fixed_args)
-    npq = len(pidx) + len(qidx)
+    npq = len(pidx) + len(qidx) + N_OFFSETS
+    names = (*names, "output.offset_x", "output.offset_y")
+    owners = (*owners, "output", "output")
     x0 = grid.start_states() if x0 is None else np.array(x0, float)
+    offset = previous.offset.copy() if previous is not None else np.zeros(2)
 
     def pack():
-        return np.concatenate([theta[pidx], arg[qidx]])
+        return np.concatenate([theta[pidx], arg[qidx], offset])
 
     def unpack(v):
         th, ar = theta.copy(), arg.copy()
         th[pidx] = v[:len(pidx)]
-        ar[qidx] = v[len(pidx):]
-        return th, ar
+        ar[qidx] = v[len(pidx):len(pidx) + len(qidx)]
+        return th, ar, v[len(pidx) + len(qidx):].copy()
 
-    status, pred, jac = _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi)
+    status, pred, jac = _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset)
     if status:
         raise FloatingPointError("the model diverged from its start values")
     r = grid.y - pred
@@ -630,9 +682,9 @@ def fit_output_error(
                 lam *= 10
                 continue
             v_new = v + d
-            th_new, ar_new = unpack(v_new)
+            th_new, ar_new, off_new = unpack(v_new)
             x0_new = x0 + Gic - GiC @ d
-            st, p_new, j_new = _shoot(kernel, grid, x0_new, th_new, ar_new, active, pidx, qidx, qlo, qhi)
+            st, p_new, j_new = _shoot(kernel, grid, x0_new, th_new, ar_new, active, pidx, qidx, qlo, qhi, off_new)
             r_new = grid.y - p_new
             with np.errstate(over="ignore", invalid="ignore"):  # a trial step that blew up is refused
                 rss_new = float(np.sum(r_new * r_new)) if st == 0 else math.inf
@@ -641,7 +693,8 @@ def fit_output_error(
             if rss_new < rss:
                 improved = True
                 drop = (rss - rss_new) / max(rss, 1e-300)
-                v, theta, arg, x0, pred, jac, r, rss = v_new, th_new, ar_new, x0_new, p_new, j_new, r_new, rss_new
+                v, theta, arg, offset, x0 = v_new, th_new, ar_new, off_new, x0_new
+                pred, jac, r, rss = p_new, j_new, r_new, rss_new
                 lam = max(lam / 5.0, 1e-9)
                 break
             lam *= 8.0
@@ -656,7 +709,7 @@ def fit_output_error(
     S = long_run_covariance(scores, bw)
     cov = bread @ S @ bread
     return OutputErrorFit(effects, names, owners, v.copy(), cov, rss, r, pred, x0, it, converged, bw, grid,
-                          theta, arg)
+                          theta, arg, offset)
 
 
 def equation_error_start(grid: ShootingGrid, effects: Sequence[str]) -> dict[str, np.ndarray]:
