@@ -77,6 +77,13 @@ def balance_data(data: BalanceData, campaign: Campaign, *, phase: str = "lag") -
     residual = fit.residual_vibration(c0, U0)
     im = influence_misfit(fit) if fit.variance_source != "none" else {"testable": False, "reason": "no noise level"}
     um = unbalance_misfit(fit) if fit.variance_source != "none" else {"testable": False, "reason": "no noise level"}
+    if im.get("flagged") and um.get("flagged"):
+        # the one-unbalance check rests on the influence coefficients: while they misfit, what
+        # removes its misfit says nothing
+        um["explained_by"] = None
+        um["explanations"] = [{"explanation": e["explanation"], "testable": False,
+                               "reason": "the influence coefficients it rests on misfit (above)"}
+                              for e in um.get("explanations", [])]
     return BalanceResult(fit, unb, (U0, cov0), residual, im, um, vis, None, notes)
 
 

@@ -215,7 +215,8 @@ class BalanceData:
     at ``rpm[s]`` on probe ``p``; ``var[k, s, p]``: the variance of that mean,
     ``E|Y - true|^2`` (complex, circular), from the pooled scatter of the repeats at that
     speed and probe (NaN where unknown); ``n[k, s, p]`` the repeats averaged;
-    ``dof``: the degrees of freedom of the pooled scatter (0: no repeats anywhere).
+    ``dof``: the degrees of freedom of the pooled scatter (0: no repeats anywhere);
+    ``run_rpm[k, s]``: the mean speed of run ``k``'s rows matched to ``rpm[s]``.
     """
 
     rpm: np.ndarray
@@ -228,6 +229,7 @@ class BalanceData:
     amp_unit: str
     source: str
     notes: tuple[str, ...] = ()
+    run_rpm: np.ndarray | None = None
 
 
 def read_balance_table(path: str | os.PathLike, campaign: Campaign, *, amp_unit: str = "um", phase: str = "lag",
@@ -288,6 +290,7 @@ def group_table(table: VectorTable, campaign: Campaign) -> BalanceData:
     S2 = len(keep_s)
     Y = np.zeros((K, S2, P), dtype=complex)
     n = np.zeros((K, S2, P), dtype=int)
+    run_rpm = np.zeros((K, S2))
     ss = np.zeros((S2, P))
     dof = np.zeros((S2, P), dtype=int)
     for si, s in enumerate(keep_s):
@@ -296,13 +299,14 @@ def group_table(table: VectorTable, campaign: Campaign) -> BalanceData:
             v = Y1[rows]
             Y[k, si] = v.mean(axis=0)
             n[k, si] = len(rows)
+            run_rpm[k, si] = float(np.mean(rpm[rows]))
             ss[si] += np.sum(np.abs(v - v.mean(axis=0)) ** 2, axis=0)
             dof[si] += len(rows) - 1
     with np.errstate(invalid="ignore", divide="ignore"):
         pooled = np.where(dof > 0, ss / np.maximum(dof, 1), np.nan)  # E|x - mean|^2 of one acquisition
     var = pooled[None] / n
     return BalanceData(np.asarray(ref_speeds)[keep_s], table.probes, campaign.runs, Y, var, n,
-                       int(dof.min()) if dof.size else 0, table.amp_unit, src, tuple(notes))
+                       int(dof.min()) if dof.size else 0, table.amp_unit, src, tuple(notes), run_rpm)
 
 
 def _tolerance(rpm: float, tol: float | None) -> float:

@@ -109,3 +109,81 @@ def campaign_table(rotor: DiskRotor, rpms, unbalance_g_mm, runs: dict[str, np.nd
 def weight(mass_g: float, radius_mm: float, angle_deg: float, phase: str = "lag") -> complex:
     """A weight as a complex unbalance (g·mm, lead convention), its angle counted like the phase."""
     return complex(from_phase(np.array(mass_g * radius_mm), np.array(angle_deg), phase))
+
+
+def table_of(header: list[str], rows: list[list], *, phase: str = "lag", source: str = "simulated"):
+    """The :class:`~rotor_env.measurements.vectors.VectorTable` (with ``runs``) of :func:`campaign_table`'s rows."""
+    from ..measurements.vectors import SPEED_UNITS, VectorTable
+
+    probes = tuple(h[: -len("_amp")] for h in header[2::2])
+    arr = np.array([r[1:] for r in rows], dtype=float)
+    Y = np.column_stack([from_phase(arr[:, 1 + 2 * j], arr[:, 2 + 2 * j], phase) for j in range(len(probes))])
+    return VectorTable(speed=arr[:, 0] * SPEED_UNITS["rpm"], t=None, probes=probes, vectors={1: Y},
+                       source=source, runs=tuple(str(r[0]) for r in rows),
+                       lines=tuple(range(2, len(rows) + 2)))
+
+
+def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float = 1.0, extra_runs: int = 1,
+                   rpms=(1200.0, 1500.0, 2000.0), level: float = 0.95) -> dict:
+    """Share of seeds whose 95 % intervals hold the truth, for a linear rotor with random trial weights.
+
+    Each seed draws the reference unbalance (200-1500 g·mm per plane, any angle) and, per
+    plane, one trial weight plus ``extra_runs`` runs with weights on random planes (2-15 g at
+    100 mm, any angle), simulates ``repeats`` acquisitions per run and speed with circular
+    noise ``noise_um``, and balances.  Counted per plane: the reference's unbalance magnitude
+    within ``ci95_g_mm`` and angle within ``ci95_deg``; every run's; the influence
+    coefficients' magnitudes; and how often a misfit is flagged (a false alarm here).
+    """
+    from . import balance_data
+    from .runs import Campaign, Plane, group_table
+
+    names = tuple("AB"[:planes])
+    probes = tuple((d, a) for d in range(planes) for a in (45.0, -45.0))
+    rotor = DiskRotor(masses_kg=(20.0,) * planes, probes=probes)
+    hits = {"ref_g_mm": 0, "ref_deg": 0, "runs_g_mm": 0, "runs_deg": 0, "influence": 0}
+    counts = {k: 0 for k in hits}
+    false_alarms = 0
+    n = 0
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        U = rng.uniform(200, 1500, planes) * np.exp(1j * rng.uniform(0, 2 * np.pi, planes))
+        weights: dict[str, dict[str, tuple[float, float]]] = {}
+        for j, name in enumerate(names):
+            weights[f"T{j + 1}"] = {name: (float(rng.uniform(2, 15)), float(rng.uniform(0, 360)))}
+        for e in range(extra_runs):
+            chosen = [nm for nm in names if rng.random() < 0.6] or [names[0]]
+            weights[f"X{e + 1}"] = {nm: (float(rng.uniform(2, 15)), float(rng.uniform(0, 360))) for nm in chosen}
+        camp = Campaign(tuple(Plane(nm, 100.0) for nm in names), "ref", weights, source="simulated")
+        W = camp.trial_matrix("lag")
+        runs = {r: W[k] for k, r in enumerate(camp.runs)}
+        header, rows = campaign_table(rotor, rpms, U, runs, repeats=repeats, noise_um=noise_um,
+                                      seed=seed + 10_000)
+        res = balance_data(group_table(table_of(header, rows), camp), camp)
+        d = res.to_dict()
+        false_alarms += not d["misfit"]["linear_model_trusted"]
+        n += 1
+        for k, run in enumerate(camp.runs):
+            truth = U + W[k]
+            for j, name in enumerate(names):
+                est = d["runs"][run]["unbalance"][name]
+                amp, ang = to_phase(np.array([truth[j]]), "lag")
+                ok_a = abs(est["g_mm"] - amp[0]) <= est["ci95_g_mm"]
+                ok_d = abs(math.remainder(est["angle_deg"] - ang[0], 360.0)) <= est["ci95_deg"]
+                key = "ref" if k == 0 else "runs"
+                hits[f"{key}_g_mm"] += ok_a
+                hits[f"{key}_deg"] += ok_d
+                counts[f"{key}_g_mm"] += 1
+                counts[f"{key}_deg"] += 1
+        for item in d["influence"]:
+            s = list(rpms).index(item["rpm"]) if item["rpm"] in rpms else int(np.argmin(np.abs(np.array(rpms) - item["rpm"])))
+            p = res.fit.data.probes.index(item["probe"])
+            j = names.index(item["plane"])
+            e = np.zeros(planes, dtype=complex)
+            e[j] = 1.0
+            h = rotor.response(rpms[s], e)[p]  # linear: the response to 1 g·mm
+            hits["influence"] += abs(item["um_per_g_mm"] - abs(h)) <= item["ci95_um_per_g_mm"]
+            counts["influence"] += 1
+    out = {k: hits[k] / counts[k] for k in hits}
+    out["misfit_flagged"] = false_alarms / n
+    out["seeds"] = n
+    return out
