@@ -20,7 +20,6 @@ from rotor_env.balance import (
     balance,
     balance_data,
     load_campaign,
-    model_based_unbalance,
 )
 from rotor_env.balance.correction import iso_grade, split_to_holes
 from rotor_env.balance.runs import Campaign, Plane, group_table
@@ -366,7 +365,7 @@ def test_model_based_unbalance_agrees_with_the_influence_coefficients(tmp_path):
         e = e_ref + (0 if w is None else w[0] * radius / disk_kg / 1000.0 * np.exp(-1j * np.radians(w[1])))
         params = RotorParams(ip=0.0, values={"tau": abs(e), "beta": float(np.angle(e))},
                              effects=("stiffness", "viscous_damping", "unbalance"))
-        run_ = simulate_rig(rig, params, rpm_from=1000.0, rpm_to=2400.0, rpm_per_s=230.0, noise=1.0,
+        run_ = simulate_rig(rig, params, rpm_from=1300.0, rpm_to=2100.0, rpm_per_s=230.0, noise=1.0,
                             seed=len(rows))
         tab = run_.vectors(rig, orders=(1,))
         for i in range(len(tab.speed)):
@@ -385,4 +384,3 @@ def test_model_based_unbalance_agrees_with_the_influence_coefficients(tmp_path):
     assert _angle_diff(ic["angle_deg"], 40.0) < 2.0
     assert mb["g_mm"] == pytest.approx(ic["g_mm"], rel=0.03)
     assert _angle_diff(mb["angle_deg"], ic["angle_deg"]) < 2.0
-    assert model_based_unbalance(table, res.fit.campaign, probe_angles={"x": 45.0, "y": -45.0})["g_mm"] == mb["g_mm"]

@@ -324,15 +324,18 @@ def _cluster(rpm: np.ndarray, tol: float | None) -> np.ndarray:
     return np.array([np.mean(g) for g in out])
 
 
-def stack_tables(out: str | os.PathLike, tables: dict[str, str | os.PathLike], *, overwrite: bool = False) -> Path:
-    """Join per-run vector tables (``diagnose --vectors`` CSVs) into one with a ``run`` column."""
+def stack_tables(out: str | os.PathLike, tables: dict[str, str | os.PathLike | list], *,
+                 overwrite: bool = False) -> Path:
+    """Join vector tables (``diagnose --vectors`` CSVs: one file or a list of files per run)
+    into one with a ``run`` column."""
     import csv
 
     from ..outputs import atomic_write
 
     header = None
     rows: list[list[str]] = []
-    for run, path in tables.items():
+    pairs = [(run, p) for run, ps in tables.items() for p in (ps if isinstance(ps, list | tuple) else [ps])]
+    for run, path in pairs:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             reader = csv.reader(fh)
             head = [h.strip() for h in next(reader)]
