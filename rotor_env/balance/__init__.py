@@ -29,8 +29,8 @@ from .runs import (
 __all__ = ["BalanceData", "BalanceError", "BalanceResult", "Campaign", "InfluenceFit", "balance", "balance_data",
            "load_campaign", "model_based_unbalance", "read_balance_table", "stack_tables"]
 
-#: a plane whose influence is below this Wald p-value is seen; above it the calibration cannot see it
-VISIBILITY_P = 1e-3
+#: a plane whose influence is not significant at this level (Wald test) is not seen by the calibration
+VISIBILITY_P = 0.05
 
 
 def balance(table: str | os.PathLike, runs: str | os.PathLike | Campaign, *, amp_unit: str = "um",

@@ -25,6 +25,9 @@ first whose check passes is named):
 * **speed-dependent coefficient** — a run's speed differs from the reference's (within the
   matching tolerance) and the response changes fast with speed (near a critical):
   ``X = X_0 + H W + d_k (X_0' + H' W)``, ``d_k`` the run's mean speed minus the reference's;
+* **real-linear response** — ``X = X_0 + H W + A conj(W)``: vectors that are not
+  steady-state (a run-up's free vibration at the natural frequency leaks into the
+  per-revolution 1X vector of a real signal as ``c A + c' conj(A)``);
 * **amplitude-dependent influence** — ``X = X_0 + H W + D W |W| / max|W|``: a rub or a
   clearance (the response not proportional to the weight): a non-linear rotor;
 * **speed-dependent unbalance** (check 2) — one unbalance per speed: a second mode near
@@ -189,6 +192,10 @@ def influence_misfit(fit: InfluenceFit, alpha: float = ALPHA) -> dict:
                            "the runs' speeds differ from the reference's and the response changes fast with speed "
                            "(a critical near): X0 + H W + d (X0' + H' W), d the run's speed offset; hold the speed "
                            "closer between runs, or tighten speed_tolerance_rpm"))
+    trials.append(("real_linear_response", np.conj(fit.W),
+                   "the response is real-linear, not complex-linear, in the weight (X0 + H W + A conj W): vectors "
+                   "that are not steady-state (a run-up's free vibration leaks into the per-revolution 1X vector as "
+                   "c A + c' conj A); balance from steady-speed acquisitions"))
     trials.append(("amplitude_dependent", fit.W * np.abs(fit.W) / Wmax,
                "the influence changes with the weight's size (X0 + H W + D W|W|): a non-linear rotor (rub, "
                "clearance, loose part); do not trust the linear correction: fix the cause, or balance in steps "

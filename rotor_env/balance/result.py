@@ -208,7 +208,7 @@ class BalanceResult:
         else:
             lines.append("misfit: the linear influence model does NOT hold (do not trust the correction as it is)")
             for title, part, bad in (
-                    ("the response is not proportional to the weight (runs against X0 + H W)", m["influence"],
+                    ("runs the influence model X0 + H W does not explain (the response not proportional to the weight)", m["influence"],
                      m["influence"].get("flagged")),
                     ("no single unbalance explains every speed and probe of run(s) "
                      + ", ".join(m["one_unbalance"].get("flagged", [])), m["one_unbalance"],
