@@ -149,7 +149,7 @@ def test_clearance_rig_is_flagged_with_the_evidence_and_a_linear_twin_is_not():
     # the evidence: the apparent influence differs between weights of different sizes
     spread = [e for e in inf["evidence"] if "apparent_influence" in e]
     assert spread
-    mags = [a["um_per_g_mm"] for a in spread[0]["apparent_influence"]]
+    mags = [a["amp_per_g_mm"] for a in spread[0]["apparent_influence"]]
     assert max(mags) / min(mags) > 1.3
     assert inf["explained_by"] is None  # no linear explanation removes a clearance
     assert "non-linear rotor" in rub.summary()
@@ -259,7 +259,7 @@ def test_cli_json_keys_and_report(campaign_files, tmp_path, capsys):
     assert {"mass_g", "angle_deg", "holes"} <= set(d["correction"]["A"])
     assert len(d["correction"]["A"]["holes"]) == 2
     assert d["iso_21940_11"]["before"]["grade"].startswith("G ")
-    assert {"rpm", "probe", "plane", "um_per_g_mm", "angle_deg", "ci95_um_per_g_mm"} <= set(d["influence"][0])
+    assert {"rpm", "probe", "plane", "amp_per_g_mm", "angle_deg", "ci95_amp_per_g_mm"} <= set(d["influence"][0])
     html = report.read_text()
     assert "<img" in html and "Correction" in html
     # never overwritten without --force
@@ -267,6 +267,25 @@ def test_cli_json_keys_and_report(campaign_files, tmp_path, capsys):
     assert main(["balance", str(table), "--runs", str(runs), "--report", str(report)]) == 2
     assert "exists" in capsys.readouterr().err
     assert report.read_bytes() == before
+
+
+def test_parquet_table_with_a_numeric_run_column(campaign_files, tmp_path):
+    """Parquet in, run labels written as numbers (0 the reference): read as their text."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table, runs, header, rows = campaign_files
+    label = {"ref": 0, "T1": 1, "T2": 2}
+    cols = {h: [r[j] for r in rows] for j, h in enumerate(header)}
+    cols["run"] = [label[v] for v in cols["run"]]
+    path = tmp_path / "table.parquet"
+    pq.write_table(pa.table(cols), path)
+    runs_num = tmp_path / "runs_num.yaml"
+    runs_num.write_text(RUNS_YAML.replace("reference: ref", "reference: 0").replace("T1:", "1:").replace("T2:", "2:"))
+    d_csv = balance(table, runs).to_dict()
+    d_pq = balance(path, runs_num).to_dict()
+    assert d_pq["correction"]["A"]["mass_g"] == pytest.approx(d_csv["correction"]["A"]["mass_g"], rel=1e-12)
+    assert set(d_pq["runs"]) == {"0", "1", "2"}
 
 
 def test_figures_have_units(campaign_files):
@@ -324,6 +343,13 @@ def test_bad_input_is_refused_by_name(campaign_files, tmp_path, capsys):
     bad = _write(tmp_path / "bad2.csv", header, broken)
     err = _err(["balance", str(bad), "--runs", str(runs)], capsys)
     assert "bad2.csv" in err and "line 6" in err and "x_amp" in err
+    # copied rows are not repeats
+    dup = {}
+    for r in rows:  # one acquisition per run and speed, written twice
+        dup.setdefault((r[0], r[1]), r)
+    bad = _write(tmp_path / "copied.csv", header, [r for r in dup.values() for _ in range(2)])
+    err = _err(["balance", str(bad), "--runs", str(runs)], capsys)
+    assert "copied.csv" in err and "identical" in err and "rpm on probe" in err
     # a plane the calibration cannot see: a trial weight far below the scatter
     camp = _campaign("AB", {"T1": {"A": (5.0, 0.0)}, "T2": {"B": (0.001, 90.0)}})
     rotor = DiskRotor(masses_kg=(20.0, 20.0), probes=((0, 45.0), (0, -45.0), (1, 45.0), (1, -45.0)))

@@ -168,7 +168,7 @@ def influence_misfit(fit: InfluenceFit, alpha: float = ALPHA) -> dict:
         mags = np.array([abs(a[2]) for a in app])
         out["evidence"].append({
             "plane": plane, "probe": c0["probe"], "rpm": c0["worst_rpm"],
-            "apparent_influence": [{"run": r, "weight_g_mm": w, f"{unit}_per_g_mm": abs(h),
+            "apparent_influence": [{"run": r, "weight_g_mm": w, "amp_per_g_mm": abs(h),
                                     "angle_deg": float(np.mod(-np.degrees(np.angle(h)), 360.0))} for r, w, h in app],
             "text": f"plane {plane}, {c0['probe']} at {c0['worst_rpm']:.0f} rpm: apparent influence "
                     + ", ".join(f"{abs(h):.3g} {unit}/(g·mm) for {w:.0f} g·mm ({r})" for r, w, h in app)

@@ -94,8 +94,8 @@ class BalanceResult:
                     a, ang, ca, cd = _polar_ci(fit.H[s, p, j], float(np.real(fit.cov_theta[s, p, 1 + j, 1 + j])),
                                                self.tq, self.phase)
                     influence.append({"rpm": float(data.rpm[s]), "probe": data.probes[p], "plane": plane,
-                                      f"{unit}_per_g_mm": a, "angle_deg": ang,
-                                      f"ci95_{unit}_per_g_mm": ca if self.intervals else None,
+                                      "amp_per_g_mm": a, "angle_deg": ang,
+                                      "ci95_amp_per_g_mm": ca if self.intervals else None,
                                       "ci95_deg": cd if self.intervals else None})
         runs = {}
         for _k, run in enumerate(data.runs):

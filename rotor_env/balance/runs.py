@@ -304,6 +304,12 @@ def group_table(table: VectorTable, campaign: Campaign) -> BalanceData:
             dof[si] += len(rows) - 1
     with np.errstate(invalid="ignore", divide="ignore"):
         pooled = np.where(dof > 0, ss / np.maximum(dof, 1), np.nan)  # E|x - mean|^2 of one acquisition
+    zero = (dof > 0) & (pooled <= 0)
+    if zero.any():
+        si, p = np.argwhere(zero)[0]
+        raise BalanceError(f"{src}: the repeats at {ref_speeds[keep_s[si]]:.0f} rpm on probe {table.probes[p]!r} are "
+                           "identical in every run (no scatter): copied rows, not independent acquisitions; give "
+                           "one row per run and speed, or the real repeats")
     var = pooled[None] / n
     return BalanceData(np.asarray(ref_speeds)[keep_s], table.probes, campaign.runs, Y, var, n,
                        int(dof.min()) if dof.size else 0, table.amp_unit, src, tuple(notes), run_rpm)

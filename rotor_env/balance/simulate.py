@@ -181,7 +181,7 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
             e = np.zeros(planes, dtype=complex)
             e[j] = 1.0
             h = rotor.response(rpms[s], e)[p]  # linear: the response to 1 g·mm
-            hits["influence"] += abs(item["um_per_g_mm"] - abs(h)) <= item["ci95_um_per_g_mm"]
+            hits["influence"] += abs(item["amp_per_g_mm"] - abs(h)) <= item["ci95_amp_per_g_mm"]
             counts["influence"] += 1
     out = {k: hits[k] / counts[k] for k in hits}
     out["misfit_flagged"] = false_alarms / n
