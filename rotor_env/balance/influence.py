@@ -42,7 +42,8 @@ the fitted reference) — complex-linear in the independent circular ``dy``, so
 ``Cov U_k = G\,\mathrm{diag}(q)\,G^H`` with ``q_{sp} = \sum_k |a_{sp,k}|^2 v_{k,sp}``; the
 residual vibration's is ``|I - H G|^2 q``.  The 95 % intervals are ``t_{0.975,\nu}`` times
 the standard error of the magnitude (radial) and of the angle (tangential over the
-magnitude), ``nu`` the degrees of freedom of the pooled scatter.  They cover the
+magnitude), ``nu`` the Welch-Satterthwaite degrees of freedom of the estimate's variance
+(each cell's pooled scatter has ``2 sum (n - 1)``: circular noise).  They cover the
 measurement noise as the repeats show it; not a model that does not hold (see the
 misfit), not the placement of the weights, not a drift between runs the repeats do not
 see.  Coverage is checked by simulation (tests/test_balance.py,
@@ -62,7 +63,7 @@ from .runs import BalanceData, BalanceError, Campaign
 __all__ = ["InfluenceFit", "fit_influence", "t_quantile"]
 
 
-def t_quantile(dof: int, level: float = 0.95) -> float:
+def t_quantile(dof: float, level: float = 0.95) -> float:
     """Two-sided quantile: Student's t with the scatter's degrees of freedom, normal without."""
     q = 0.5 + level / 2
     return float(stats.t.ppf(q, dof)) if dof > 0 else float(stats.norm.ppf(q))
@@ -85,8 +86,36 @@ class InfluenceFit:
     condition_number: float
     calibration_condition_number: float
     variance_source: str  #: "repeats", "residuals" or "none"
-    dof: int  #: degrees of freedom of the variance (0: normal quantile, or none)
+    dof: int  #: smallest real degrees of freedom of a cell's variance (0: normal quantile, or none)
     phase: str = "lag"
+    cell_dof: np.ndarray | None = None  #: (S, P) real degrees of freedom of each cell's variance
+
+    def satterthwaite(self, contrib: np.ndarray) -> np.ndarray:
+        """Welch-Satterthwaite degrees of freedom of variances ``sum_sp contrib[..., sp]``.
+
+        ``contrib[..., sp]``: the share of cell ``sp``'s (independent, estimated) variance;
+        ``nu = (sum c)^2 / sum(c^2 / nu_sp)`` — an estimate resting on many cells has more
+        degrees of freedom than any one of them.
+        """
+        if self.cell_dof is None or self.dof <= 0:
+            return np.full(contrib.shape[:-1], float(self.dof))
+        nu = self.cell_dof.reshape(-1).astype(float)
+        c = np.asarray(contrib, dtype=float)
+        den = np.sum(c ** 2 / nu, axis=-1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = np.sum(c, axis=-1) ** 2 / den
+        return np.where(den > 0, out, float(self.dof))
+
+    def unbalance_dof(self, c: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """Degrees of freedom (J,) of the unbalance's variance (:meth:`satterthwaite`)."""
+        q = self._q(c, U)
+        return self.satterthwaite(np.abs(self.G) ** 2 * q[None, :])
+
+    def residual_dof(self, c: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """Degrees of freedom (S, P) of the residual vibration's variance."""
+        S, P, _ = self.H.shape
+        M = np.eye(S * P) - self.Hmat @ self.G
+        return self.satterthwaite(np.abs(M) ** 2 * self._q(c, U)[None, :]).reshape(S, P)
 
     @property
     def X0(self) -> np.ndarray:
@@ -195,7 +224,9 @@ def fit_influence(data: BalanceData, campaign: Campaign, *, phase: str = "lag") 
     svh = np.linalg.svd(Hw / colnorm, compute_uv=False)
     cond = float(svh[0] / svh[-1]) if svh[-1] > 0 else math.inf
     G = np.linalg.pinv(Hw) * np.sqrt(wsp)[None, :]
-    return InfluenceFit(data, campaign, W, theta, cov, L, v, resid, lev, G, cond, cal_cond, source, dof, phase)
+    cell_dof = data.cell_dof if source == "repeats" else None
+    return InfluenceFit(data, campaign, W, theta, cov, L, v, resid, lev, G, cond, cal_cond, source, dof, phase,
+                        cell_dof)
 
 
 def visibility(fit: InfluenceFit) -> list[dict]:
@@ -213,7 +244,7 @@ def visibility(fit: InfluenceFit) -> list[dict]:
         stat = float(2 * z2.sum())
         dfn = 2 * S * P
         if fit.dof > 0 and fit.variance_source == "repeats":
-            p = float(stats.f.sf(stat / dfn, dfn, fit.dof))
+            p = float(stats.f.sf(stat / dfn, dfn, float(fit.satterthwaite(var.reshape(-1)))))
         else:
             p = float(stats.chi2.sf(stat, dfn))
         out.append({"plane": name, "chi2": stat, "dof": dfn, "p_value": p,

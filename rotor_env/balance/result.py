@@ -20,7 +20,8 @@ ANGLE_CONVENTION = {
     "lead": "degrees in the direction of rotation from the keyphasor mark, like the phase lead (weights, "
             "unbalance, correction and phases alike)",
 }
-COVERS = ("95 % intervals (Student t with the repeats' degrees of freedom) of the measurement noise shown by the "
+COVERS = ("95 % intervals (Student t, Welch-Satterthwaite degrees of freedom of the repeats' scatter) of the "
+          "measurement noise shown by the "
           "repeats, propagated to first order; they do not cover a model that does not hold (see misfit), the "
           "placement of the weights, or a drift between runs that the repeats do not see")
 
@@ -75,10 +76,17 @@ class BalanceResult:
     def correction_vectors(self) -> np.ndarray:
         return -self.reference_unbalance[0]
 
-    def _unb_dict(self, U, cov) -> dict:
+    def _t(self, dof) -> np.ndarray:
+        """Student-t quantiles for degrees of freedom (array); the fit's own without repeats."""
+        if self.fit.variance_source != "repeats":
+            return np.full(np.shape(dof), self.tq)
+        return np.vectorize(t_quantile)(np.asarray(dof, dtype=float))
+
+    def _unb_dict(self, U, cov, c) -> dict:
         out = {}
+        tq = self._t(self.fit.unbalance_dof(c, U))
         for j, name in enumerate(self.fit.campaign.plane_names):
-            a, ang, ca, cd = _polar_ci(U[j], float(np.real(cov[j, j])), self.tq, self.phase)
+            a, ang, ca, cd = _polar_ci(U[j], float(np.real(cov[j, j])), float(tq[j]), self.phase)
             out[name] = {"g_mm": a, "angle_deg": ang, "ci95_g_mm": ca if self.intervals else None,
                          "ci95_deg": cd if self.intervals else None}
         return out
@@ -88,33 +96,36 @@ class BalanceResult:
         S, P, J = fit.H.shape
         unit = data.amp_unit
         influence = []
+        t_cell = self._t(fit.cell_dof) if fit.cell_dof is not None else np.full((S, P), self.tq)
         for s in range(S):
             for p in range(P):
                 for j, plane in enumerate(camp.plane_names):
                     a, ang, ca, cd = _polar_ci(fit.H[s, p, j], float(np.real(fit.cov_theta[s, p, 1 + j, 1 + j])),
-                                               self.tq, self.phase)
+                                               float(t_cell[s, p]), self.phase)
                     influence.append({"rpm": float(data.rpm[s]), "probe": data.probes[p], "plane": plane,
                                       "amp_per_g_mm": a, "angle_deg": ang,
                                       "ci95_amp_per_g_mm": ca if self.intervals else None,
                                       "ci95_deg": cd if self.intervals else None})
         runs = {}
-        for _k, run in enumerate(data.runs):
+        for k, run in enumerate(data.runs):
             U, cov = self.unbalance[run]
             cells = [c for c in self.influence_misfit.get("cells", []) if c["run"] == run]
             one = self.unbalance_misfit.get("runs", {}).get(run, {})
             runs[run] = {
                 "reference": run == camp.reference,
                 "trial": {pl: {"mass_g": m, "angle_deg": a} for pl, (m, a) in camp.weights.get(run, {}).items()},
-                "unbalance": self._unb_dict(U, cov),
+                "unbalance": self._unb_dict(U, cov, fit.run_combination(k)),
                 "misfit": {"influence": cells, "one_unbalance": one,
                            "flagged": any(c["flagged"] for c in cells) or any(v["flagged"] for v in one.values())},
             }
         C = self.correction_vectors()
         Uref, covref = self.reference_unbalance
         correction = {}
+        c0 = fit.reference_combination()
+        t_ref = self._t(fit.unbalance_dof(c0, Uref))
         for j, pl in enumerate(camp.planes):
             m, ang = weight_of(C[j], pl.radius_mm, self.phase)
-            _, _, ca, cd = _polar_ci(C[j], float(np.real(covref[j, j])), self.tq, self.phase)
+            _, _, ca, cd = _polar_ci(C[j], float(np.real(covref[j, j])), float(t_ref[j]), self.phase)
             correction[pl.name] = {"mass_g": m, "angle_deg": ang, "g_mm": abs(C[j]),
                                    "ci95_mass_g": ca / pl.radius_mm if self.intervals else None,
                                    "ci95_deg": cd if self.intervals else None, "radius_mm": pl.radius_mm,
@@ -122,9 +133,10 @@ class BalanceResult:
         R, Rvar = self.residual
         X0 = fit.X0
         predicted = []
+        t_res = self._t(fit.residual_dof(c0, Uref))
         for s in range(S):
             for p in range(P):
-                a, ang, ca, _ = _polar_ci(R[s, p], float(Rvar[s, p]), self.tq, self.phase)
+                a, ang, ca, _ = _polar_ci(R[s, p], float(Rvar[s, p]), float(t_res[s, p]), self.phase)
                 b, bang = to_phase(np.array([X0[s, p]]), self.phase)
                 predicted.append({"rpm": float(data.rpm[s]), "probe": data.probes[p], "amp": a, "phase_deg": ang,
                                   "ci95_amp": ca if self.intervals else None, "before_amp": float(b[0]),
@@ -132,7 +144,7 @@ class BalanceResult:
         iso = None
         if camp.rotor_mass_kg is not None and camp.service_rpm is not None:
             before = float(np.sum(np.abs(Uref)))
-            after = float(self.tq * np.sum(np.sqrt(np.real(np.diag(covref)) / 2))) if self.intervals else None
+            after = float(np.sum(t_ref * np.sqrt(np.real(np.diag(covref)) / 2))) if self.intervals else None
             iso = {"rotor_mass_kg": camp.rotor_mass_kg, "service_rpm": camp.service_rpm,
                    "before": iso_grade(before, camp.rotor_mass_kg, camp.service_rpm),
                    "after_ci95": iso_grade(after, camp.rotor_mass_kg, camp.service_rpm) if after is not None else None,
@@ -153,7 +165,9 @@ class BalanceResult:
             "reference": camp.reference,
             "condition_number": fit.condition_number,
             "calibration_condition_number": fit.calibration_condition_number,
-            "variance": {"source": fit.variance_source, "dof": fit.dof, "t_quantile": self.tq},
+            "variance": {"source": fit.variance_source, "dof": fit.dof,
+                         "reference_unbalance_dof": [float(v) for v in np.atleast_1d(fit.unbalance_dof(c0, Uref))]
+                         if fit.variance_source == "repeats" else None},
             "intervals_cover": COVERS,
             "visibility": self.visibility,
             "influence": influence,

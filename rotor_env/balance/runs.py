@@ -215,7 +215,9 @@ class BalanceData:
     at ``rpm[s]`` on probe ``p``; ``var[k, s, p]``: the variance of that mean,
     ``E|Y - true|^2`` (complex, circular), from the pooled scatter of the repeats at that
     speed and probe (NaN where unknown); ``n[k, s, p]`` the repeats averaged;
-    ``dof``: the degrees of freedom of the pooled scatter (0: no repeats anywhere);
+    ``dof``: the smallest real degrees of freedom of a cell's pooled scatter (0: no repeats
+    anywhere), ``cell_dof[s, p]`` each cell's: ``2 sum_k (n_k - 1)``, two per complex residual,
+    as the noise is circular (its real and imaginary parts each carry half the variance);
     ``run_rpm[k, s]``: the mean speed of run ``k``'s rows matched to ``rpm[s]``.
     """
 
@@ -230,6 +232,7 @@ class BalanceData:
     source: str
     notes: tuple[str, ...] = ()
     run_rpm: np.ndarray | None = None
+    cell_dof: np.ndarray | None = None
 
 
 def read_balance_table(path: str | os.PathLike, campaign: Campaign, *, amp_unit: str = "um", phase: str = "lag",
@@ -312,7 +315,8 @@ def group_table(table: VectorTable, campaign: Campaign) -> BalanceData:
                            "one row per run and speed, or the real repeats")
     var = pooled[None] / n
     return BalanceData(np.asarray(ref_speeds)[keep_s], table.probes, campaign.runs, Y, var, n,
-                       int(dof.min()) if dof.size else 0, table.amp_unit, src, tuple(notes), run_rpm)
+                       2 * int(dof.min()) if dof.size else 0, table.amp_unit, src, tuple(notes), run_rpm,
+                       2 * dof)
 
 
 def _tolerance(rpm: float, tol: float | None) -> float:

@@ -132,10 +132,11 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
     100 mm, any angle), simulates ``repeats`` acquisitions per run and speed with circular
     noise ``noise_um``, and balances.  Counted per plane: the reference's unbalance magnitude
     within ``ci95_g_mm`` and angle within ``ci95_deg``; every run's; the influence
-    coefficients' magnitudes; and how often a misfit is flagged (a false alarm here).
+    coefficients' magnitudes; how often a misfit is flagged (a false alarm here); and how
+    many seeds were refused (a plane the calibration cannot see: not counted in the shares).
     """
     from . import balance_data
-    from .runs import Campaign, Plane, group_table
+    from .runs import BalanceError, Campaign, Plane, group_table
 
     names = tuple("AB"[:planes])
     probes = tuple((d, a) for d in range(planes) for a in (45.0, -45.0))
@@ -144,6 +145,7 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
     counts = {k: 0 for k in hits}
     false_alarms = 0
     n = 0
+    refused = 0
     for seed in seeds:
         rng = np.random.default_rng(seed)
         U = rng.uniform(200, 1500, planes) * np.exp(1j * rng.uniform(0, 2 * np.pi, planes))
@@ -158,7 +160,11 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
         runs = {r: W[k] for k, r in enumerate(camp.runs)}
         header, rows = campaign_table(rotor, rpms, U, runs, repeats=repeats, noise_um=noise_um,
                                       seed=seed + 10_000)
-        res = balance_data(group_table(table_of(header, rows), camp), camp)
+        try:
+            res = balance_data(group_table(table_of(header, rows), camp), camp)
+        except BalanceError:  # a trial weight lost in the noise: refused, as a user would be
+            refused += 1
+            continue
         d = res.to_dict()
         false_alarms += not d["misfit"]["linear_model_trusted"]
         n += 1
@@ -186,4 +192,5 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
     out = {k: hits[k] / counts[k] for k in hits}
     out["misfit_flagged"] = false_alarms / n
     out["seeds"] = n
+    out["refused"] = refused
     return out
