@@ -39,7 +39,7 @@ def main() -> None:
             k = round(out[key] * n)
             band[key] = [float(stats.beta.ppf(0.025, k, n - k + 1)), float(stats.beta.ppf(0.975, k + 1, n - k))]
         print(json.dumps({"planes": planes, "seeds": args.seeds, "noise_um": args.noise_um,
-                          "repeats": args.repeats, **{k: (v if isinstance(v, int) else round(float(v), 4)) for k, v in out.items()},
+                          "repeats": args.repeats, **{k: (v if v is None or isinstance(v, int) else round(float(v), 4)) for k, v in out.items()},
                           "clopper_pearson_95": band, "seconds": round(time.perf_counter() - t0, 1)}))
 
 

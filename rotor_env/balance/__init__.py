@@ -31,6 +31,8 @@ __all__ = ["BalanceData", "BalanceError", "BalanceResult", "Campaign", "Influenc
 
 #: a plane whose influence is not significant at this level (Wald test) is not seen by the calibration
 VISIBILITY_P = 0.05
+#: below this RMS ratio of a plane's influence to its standard error the intervals are noted as optimistic
+LOW_SNR = 10.0
 
 
 def balance(table: str | os.PathLike, runs: str | os.PathLike | Campaign, *, amp_unit: str = "um",
@@ -62,6 +64,12 @@ def balance_data(data: BalanceData, campaign: Campaign, *, phase: str = "lag") -
             f"vibration by no more than the repeats' scatter (Wald p = {v['p_value']:.2g}, largest change "
             f"{v['snr']:.2g} standard errors) in {data.source}; use a larger trial weight (a change of at least "
             "30 % or 30 deg)")
+    weak = [v for v in vis if v["rms_snr"] < LOW_SNR]
+    if weak:
+        notes.append("trial weights of plane(s) " + ", ".join(f"{v['plane']} ({v['rms_snr']:.2g})" for v in weak)
+                     + f" moved the vibration by fewer than {LOW_SNR:g} standard errors (RMS over speeds and probes): "
+                     "the first-order intervals under-cover there (docs/BALANCING.md §4); use larger trial weights "
+                     "or more repeats")
     if fit.variance_source == "none":
         notes.append("no repeats and no run beyond the planes + 1: the noise cannot be estimated, no intervals")
     elif fit.variance_source == "residuals":

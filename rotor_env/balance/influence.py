@@ -24,7 +24,9 @@ The unbalance
 -------------
 A run's total unbalance ``U_k`` (g·mm per plane) is what makes its vibration,
 ``X_k ≈ H U_k`` at every speed and probe at once (``N = S P`` complex equations, ``J``
-unknowns), solved by weighted least squares with the weights ``w_sp = 1/mean_k v_{k,sp}``:
+unknowns), solved by weighted least squares with the weights ``w_sp = mean_k n_{k,sp} / sigma_p^2``
+(``sigma_p^2``: probe ``p``'s scatter of one acquisition pooled over all speeds — weights
+from a dozen degrees of freedom per cell would bias the intervals low):
 ``U_k = G X_k``, ``G = (H^H W H)^{-1} H^H W``.  The reference's unbalance ``U_0 = G X_0``
 uses the fitted reference response; the correction is ``-U_0`` and the predicted residual
 vibration ``(I - H G) X_0``.  ``cond(W^{1/2} H)`` (columns scaled to unit norm) is the
@@ -214,7 +216,17 @@ def fit_influence(data: BalanceData, campaign: Campaign, *, phase: str = "lag") 
         v = v * s2
         cov = cov * s2
     H = theta[..., 1:].reshape(S * P, J)
-    wsp = 1.0 / v.mean(axis=0).reshape(-1)
+    # the weights of the unbalance fit: the noise level per probe, pooled over its speeds, over
+    # the repeats averaged.  Per-cell variances (a dozen degrees of freedom) as weights would
+    # favour the cells whose scatter happens to be low *and* claim their low variance: the
+    # intervals would cover 90 % instead of 95 % (measured); the per-cell variances still
+    # give the intervals (the sandwich G diag(q) G^H holds for any fixed weights)
+    if source == "repeats" and data.cell_dof is not None:
+        pooled = (data.var * data.n)[0]  # (S, P): one acquisition's variance per cell
+        level = np.sum(pooled * data.cell_dof, axis=0) / np.sum(data.cell_dof, axis=0)  # (P,)
+        wsp = (np.mean(data.n, axis=0) / level[None, :]).reshape(-1)
+    else:
+        wsp = 1.0 / v.mean(axis=0).reshape(-1)
     Hw = H * np.sqrt(wsp)[:, None]
     colnorm = np.linalg.norm(Hw, axis=0)
     for j, name in enumerate(names):
@@ -248,5 +260,5 @@ def visibility(fit: InfluenceFit) -> list[dict]:
         else:
             p = float(stats.chi2.sf(stat, dfn))
         out.append({"plane": name, "chi2": stat, "dof": dfn, "p_value": p,
-                    "snr": float(math.sqrt(z2.max()))})
+                    "snr": float(math.sqrt(z2.max())), "rms_snr": float(math.sqrt(z2.mean()))})
     return out

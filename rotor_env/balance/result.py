@@ -278,7 +278,7 @@ class BalanceResult:
             ax.plot(np.radians(gr), ar, "k*", ms=8, label="after correction (predicted)")
             ax.set_title(f"{data.probes[p]}: 1X [{unit}], phase {self.phase} [deg]", fontsize=9)
         axes[0, 0].legend(fontsize=7, loc="lower left", bbox_to_anchor=(-0.25, -0.2))
-        fig.suptitle(f"1X vectors per run; arrows: each plane's trial-weight effect at {data.rpm[s]:.0f} rpm")
+        fig.suptitle(f"1X vectors per run; arrows: each plane's trial-weight effect at {data.rpm[s]:.0f} rpm", y=1.04)
         return fig
 
     def plot_bode(self, ax=None):

@@ -141,7 +141,8 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
     names = tuple("AB"[:planes])
     probes = tuple((d, a) for d in range(planes) for a in (45.0, -45.0))
     rotor = DiskRotor(masses_kg=(20.0,) * planes, probes=probes)
-    hits = {"ref_g_mm": 0, "ref_deg": 0, "runs_g_mm": 0, "runs_deg": 0, "influence": 0}
+    hits = {"ref_g_mm": 0, "ref_deg": 0, "runs_g_mm": 0, "runs_deg": 0, "influence": 0,
+            "ref_g_mm_low_snr": 0, "ref_g_mm_high_snr": 0}
     counts = {k: 0 for k in hits}
     false_alarms = 0
     n = 0
@@ -176,6 +177,10 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
                 ok_a = abs(est["g_mm"] - amp[0]) <= est["ci95_g_mm"]
                 ok_d = abs(math.remainder(est["angle_deg"] - ang[0], 360.0)) <= est["ci95_deg"]
                 key = "ref" if k == 0 else "runs"
+                if k == 0:  # split by how far the trial weights stood out of the noise
+                    band = "low" if min(v["rms_snr"] for v in d["visibility"]) < 10 else "high"
+                    hits[f"ref_g_mm_{band}_snr"] += ok_a
+                    counts[f"ref_g_mm_{band}_snr"] += 1
                 hits[f"{key}_g_mm"] += ok_a
                 hits[f"{key}_deg"] += ok_d
                 counts[f"{key}_g_mm"] += 1
@@ -189,7 +194,8 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
             h = rotor.response(rpms[s], e)[p]  # linear: the response to 1 g·mm
             hits["influence"] += abs(item["amp_per_g_mm"] - abs(h)) <= item["ci95_amp_per_g_mm"]
             counts["influence"] += 1
-    out = {k: hits[k] / counts[k] for k in hits}
+    out = {k: (hits[k] / counts[k] if counts[k] else None) for k in hits}
+    out["ref_low_snr_count"] = counts["ref_g_mm_low_snr"]
     out["misfit_flagged"] = false_alarms / n
     out["seeds"] = n
     out["refused"] = refused
