@@ -91,6 +91,7 @@ class InfluenceFit:
     dof: int  #: smallest real degrees of freedom of a cell's variance (0: normal quantile, or none)
     phase: str = "lag"
     cell_dof: np.ndarray | None = None  #: (S, P) real degrees of freedom of each cell's variance
+    w: np.ndarray | None = None  #: (N,) weights of the unbalance fit
 
     def satterthwaite(self, contrib: np.ndarray) -> np.ndarray:
         """Welch-Satterthwaite degrees of freedom of variances ``sum_sp contrib[..., sp]``.
@@ -141,10 +142,39 @@ class InfluenceFit:
         """
         S, P, J = self.H.shape
         X = np.einsum("spk,ksp->sp", c, self.data.Y).reshape(-1)
-        U = self.G @ X
+        U = self._corrected(c, X)
         q = self._q(c, U)
         cov = (self.G * q[None, :]) @ self.G.conj().T
         return U, cov
+
+    def _corrected(self, c: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """Least squares of ``X ≈ H U`` corrected for the noise of ``H`` (errors in variables).
+
+        With noisy coefficients ``E[Ĥ^H W Ĥ] = H^H W H + sum_sp w_sp E[dH* dH^T]`` — the
+        normal matrix grows by the coefficients' noise and the unbalance shrinks towards
+        zero (regression dilution; tens of standard errors where a plane's influence on
+        some probe is small against the noise) — and ``Ĥ^H W X̂`` gains
+        ``sum_sp w_sp E[dH* dX]`` (both come from the same runs).  Both expectations are
+        known from the influence regression (``Cov theta``, ``L``, ``v``) and subtracted
+        (Fuller's corrected least squares); where the corrected normal matrix would lose
+        more than half of any eigenvalue, the plain weighted least squares is kept.
+        """
+        if self.w is None or self.variance_source == "none":
+            return self.G @ X
+        S, P, J = self.H.shape
+        w = self.w.reshape(S, P)
+        H = self.Hmat
+        A = (H.conj().T * self.w[None, :]) @ H
+        b = (H.conj().T * self.w[None, :]) @ X
+        # E[conj(dH_i) dH_j] = cov[j, i]; E[conj(dH_i) dX] = sum_k c_k conj(L[1+i, k]) v_k
+        B = np.einsum("sp,spji->ij", w, self.cov_theta[:, :, 1:, 1:])
+        d = np.einsum("sp,spk,spik,ksp->i", w, c, np.conj(self.L[:, :, 1:, :]), self.v)
+        Ac = A - B
+        ev_a = np.linalg.eigvalsh(A)
+        ev_c = np.linalg.eigvalsh(0.5 * (Ac + Ac.conj().T))
+        if ev_c.min() < 0.5 * ev_a.min():
+            return self.G @ X
+        return np.linalg.solve(Ac, b - d)
 
     def _q(self, c: np.ndarray, U: np.ndarray) -> np.ndarray:
         """``q_sp = sum_k |a_sp,k|^2 v_k,sp``, ``a_sp = c_sp - L_sp,1:^T U`` (module docstring)."""
@@ -238,7 +268,7 @@ def fit_influence(data: BalanceData, campaign: Campaign, *, phase: str = "lag") 
     G = np.linalg.pinv(Hw) * np.sqrt(wsp)[None, :]
     cell_dof = data.cell_dof if source == "repeats" else None
     return InfluenceFit(data, campaign, W, theta, cov, L, v, resid, lev, G, cond, cal_cond, source, dof, phase,
-                        cell_dof)
+                        cell_dof, wsp)
 
 
 def visibility(fit: InfluenceFit) -> list[dict]:
