@@ -343,6 +343,10 @@ def test_bad_input_is_refused_by_name(campaign_files, tmp_path, capsys):
     bad = _write(tmp_path / "bad2.csv", header, broken)
     err = _err(["balance", str(bad), "--runs", str(runs)], capsys)
     assert "bad2.csv" in err and "line 6" in err and "x_amp" in err
+    # a table without the run column
+    bad = _write(tmp_path / "norun.csv", header[1:], [r[1:] for r in rows])
+    err = _err(["balance", str(bad), "--runs", str(runs)], capsys)
+    assert "norun.csv" in err and "no 'run' column" in err
     # copied rows are not repeats
     dup = {}
     for r in rows:  # one acquisition per run and speed, written twice
