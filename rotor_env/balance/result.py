@@ -239,8 +239,14 @@ class BalanceResult:
                     else:
                         lines.append(f"    {e['explanation']}: not testable ({e['reason']})")
                 if not part.get("explained_by"):
-                    lines.append("    no explanation tried removes it" + (
-                        ": a non-linear rotor (rub, clearance, loose part) is left" if part is m["influence"] else ""))
+                    tried = [e for e in part.get("explanations", []) if e.get("testable")]
+                    if not tried and part.get("explanations"):
+                        lines.append("    no explanation could be tested (more runs needed: another trial weight of "
+                                     "another size or angle)")
+                    else:
+                        lines.append("    no explanation tried removes it" + (
+                            ": a non-linear rotor (rub, clearance, loose part) is left" if part is m["influence"]
+                            else ""))
         if d["model_based"]:
             mb = d["model_based"]
             lines.append(f"model-based (one run-up of {mb['run']}, no trial weight): {mb['g_mm']:.4g} g·mm at "
