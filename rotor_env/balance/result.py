@@ -241,8 +241,7 @@ class BalanceResult:
                 if not part.get("explained_by"):
                     tried = [e for e in part.get("explanations", []) if e.get("testable")]
                     if not tried and part.get("explanations"):
-                        lines.append("    no explanation could be tested (more runs needed: another trial weight of "
-                                     "another size or angle)")
+                        lines.append("    no explanation could be tested (reasons above)")
                     else:
                         lines.append("    no explanation tried removes it" + (
                             ": a non-linear rotor (rub, clearance, loose part) is left" if part is m["influence"]
