@@ -520,6 +520,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .fleet import add_batch_parser
 
     add_batch_parser(sub)
+    from .balance.cli import add_balance_parser
+
+    add_balance_parser(sub)
     _add_plugin_parsers(sub)
     return parser
 

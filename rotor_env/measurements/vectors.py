@@ -304,6 +304,10 @@ class VectorTable:
     angles: np.ndarray | None = None
     source: str = ""
     notes: tuple[str, ...] = field(default=())
+    #: with ``load_vector_table(..., run_column=...)``: the run label of every row (file order)
+    runs: tuple[str, ...] | None = None
+    #: the file line of every row (errors of a caller that reads the table further name it)
+    lines: tuple[int, ...] | None = None
 
     @property
     def rpm(self) -> np.ndarray:
@@ -341,11 +345,17 @@ def load_vector_table(
     phase: str = "lag",
     speed_unit: str = "rpm",
     angles: dict[str, float] | None = None,
+    run_column: str | None = None,
 ) -> VectorTable:
     """Read an order-tracked table: ``rpm`` (or ``speed``), optional ``t``, and per probe
     ``amp``/``phase_deg`` (one probe) or ``NAME_amp``/``NAME_phase_deg``; 2X and 3X as
     ``..._amp_2x``/``..._phase_deg_2x``.  ``angles``: probe name -> mounting angle in
     degrees (from the rig description).  Errors name the file, column, line and value.
+
+    ``run_column`` (a balancing campaign, :mod:`rotor_env.balance`): that column labels
+    every row with its run (text or numbers); the rows stay in file order (one run's rows
+    are repeat acquisitions at a few speeds: neither a sweep nor at least 8 rows) and
+    :attr:`VectorTable.runs` holds the labels.
     """
     from ..io import MeasurementError, read_table
 
@@ -354,10 +364,21 @@ def load_vector_table(
     if amp_unit not in AMPLITUDE_UNITS:
         raise VectorTableError(f"--amp-unit {amp_unit!r}: not one of {', '.join(AMPLITUDE_UNITS)} "
                                "(volts: convert with the probe sensitivity in the rig description)")
+    labels: dict[int, str] | None = None
     try:
-        header, data, lines = read_table(path)
+        if run_column is None:
+            header, data, lines = read_table(path)
+        else:
+            names_in_file, labels = _text_column(path, run_column)
+            header, data, lines = read_table(path, numeric=[h for h in names_in_file
+                                                            if h.lower() != run_column.lower()])
     except MeasurementError as exc:
         raise VectorTableError(str(exc)) from None
+    if labels is not None:
+        # the label column is text: not a probe or speed column below
+        keep = [j for j, h in enumerate(header) if h.strip().lower() != run_column.lower()]
+        header = [header[j] for j in keep]
+        data = data[:, keep]
     header = [h.strip() for h in header]
     lower = [h.lower() for h in header]
     speed_col = next((c for c in ("rpm", "speed_rpm", "speed") if c in lower), None)
@@ -381,7 +402,7 @@ def load_vector_table(
     if any(1 not in v for v in probes.values()):
         bad = next(k for k, v in probes.items() if 1 not in v)
         raise VectorTableError(f"{path}: probe {bad!r} has no 1X columns ({bad}_amp, {bad}_phase_deg)")
-    if data.shape[0] < 8:
+    if data.shape[0] < 8 and labels is None:
         raise VectorTableError(f"{path}: only {data.shape[0]} rows; an order-tracked run needs at least 8 speeds")
     used = [col[speed_col]] + [i for v in probes.values() for pair in v.values() for i in pair]
     t_idx = col.get("t", col.get("time", col.get("time_s")))
@@ -405,14 +426,16 @@ def load_vector_table(
                                    "is negative")
     notes: list[str] = []
     t = None
-    if t_idx is not None:
+    if t_idx is not None and labels is not None:
+        t = data[:, t_idx].astype(float)  # each run its own clock: no order across runs
+    elif t_idx is not None:
         t = data[:, t_idx].astype(float)
         step = np.diff(t)
         if (step <= 0).any():
             r = int(np.argmax(step <= 0)) + 1
             raise VectorTableError(f"{path}, line {lines[r]}, column {header[t_idx]!r}: time {t[r]!r} does not "
                                    f"increase (previous {t[r - 1]!r})")
-    else:
+    elif labels is None:
         notes.append("no time column: the synchronous response is taken as quasi-steady")
         if not (np.all(np.diff(speed) > 0) or np.all(np.diff(speed) < 0)):
             # quasi-steady rows stand on their own: order them by speed (the noise floor and
@@ -437,5 +460,49 @@ def load_vector_table(
             raise VectorTableError(f"{path}: probe(s) {missing} of the table are not in the rig description "
                                    f"(it has {sorted(angles)})")
         ang = np.radians([angles[p] for p in names])
+    runs = None
+    if labels is not None:
+        runs = []
+        for line in lines:
+            lab = labels.get(int(line), "")
+            if not lab:
+                raise VectorTableError(f"{path}, line {int(line)}, column {run_column!r}: empty run label")
+            runs.append(lab)
+        runs = tuple(runs)
     return VectorTable(speed=speed, t=t, probes=names, vectors=vectors, amp_unit=amp_unit, angles=ang,
-                       source=str(path), notes=tuple(notes))
+                       source=str(path), notes=tuple(notes), runs=runs,
+                       lines=tuple(int(x) for x in lines))
+
+
+def _text_column(path: Path, name: str) -> tuple[list[str], dict[int, str]]:
+    """The header and one column read as text: file line (as :func:`~rotor_env.io.read_table`
+    numbers them) -> the cell, stripped.  A number is its text (``1`` stays ``1``)."""
+    if path.suffix == ".parquet":
+        try:
+            import pyarrow.parquet as pq
+
+            table = pq.read_table(path)
+        except Exception as exc:
+            raise VectorTableError(f"{path}: not a readable Parquet file ({exc})") from None
+        header = list(table.column_names)
+        match = [h for h in header if h.strip().lower() == name.lower()]
+        if not match:
+            raise VectorTableError(f"{path}: no {name!r} column (found columns {header})")
+        cells = table.column(match[0]).to_pylist()
+        return header, {r + 2: ("" if c is None else str(c).strip()) for r, c in enumerate(cells)}
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            reader = csv.reader(fh)
+            header = [h.strip() for h in next(reader, [])]
+            match = [j for j, h in enumerate(header) if h.lower() == name.lower()]
+            if not match:
+                raise VectorTableError(f"{path}: no {name!r} column (found columns {header})")
+            j = match[0]
+            out = {}
+            for row in reader:
+                if not row or all(not c.strip() for c in row):
+                    continue
+                out[reader.line_num] = row[j].strip() if j < len(row) else ""
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise VectorTableError(f"{path}: cannot read the file ({exc})") from None
+    return header, out

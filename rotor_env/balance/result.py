@@ -1,0 +1,353 @@
+"""The balancing result: JSON (stable keys), a text summary, figures and an HTML report."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..measurements.vectors import to_phase
+from .correction import iso_grade, split_to_holes, weight_of
+from .influence import InfluenceFit, t_quantile
+
+__all__ = ["BalanceResult"]
+
+ANGLE_CONVENTION = {
+    "lag": "degrees against the rotation from the keyphasor mark, like the phase lag (weights, unbalance, "
+           "correction and phases alike)",
+    "lead": "degrees in the direction of rotation from the keyphasor mark, like the phase lead (weights, "
+            "unbalance, correction and phases alike)",
+}
+COVERS = ("95 % intervals (Student t, Welch-Satterthwaite degrees of freedom of the repeats' scatter) of the "
+          "measurement noise shown by the "
+          "repeats, propagated to first order; they do not cover a model that does not hold (see misfit), the "
+          "placement of the weights, or a drift between runs that the repeats do not see")
+
+
+def _polar_ci(U: complex, var: float, tq: float, phase: str) -> tuple[float, float, float, float]:
+    """Magnitude, angle (phase convention), and their 95 % half-widths for a circular complex estimate."""
+    amp, ang = to_phase(np.array([U]), phase)
+    se = math.sqrt(max(var, 0.0) / 2.0)  # circular: each component carries half the variance
+    ci_amp = tq * se
+    ci_deg = 180.0 if amp[0] <= ci_amp else math.degrees(math.asin(min(1.0, ci_amp / amp[0])))
+    return float(amp[0]), float(np.mod(ang[0], 360.0)), ci_amp, ci_deg
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+@dataclass
+class BalanceResult:
+    """Everything a balancing campaign says (see :func:`rotor_env.balance.balance`)."""
+
+    fit: InfluenceFit
+    unbalance: dict[str, tuple[np.ndarray, np.ndarray]]  #: run -> (U (J,), complex covariance (J, J)), g·mm
+    reference_unbalance: tuple[np.ndarray, np.ndarray]  #: from the fitted reference response
+    residual: tuple[np.ndarray, np.ndarray]  #: predicted vibration after correction (S, P) and its variance
+    influence_misfit: dict
+    unbalance_misfit: dict
+    visibility: list[dict]
+    model_based: dict | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def phase(self) -> str:
+        return self.fit.phase
+
+    @property
+    def tq(self) -> float:
+        return t_quantile(self.fit.dof)
+
+    @property
+    def intervals(self) -> bool:
+        return self.fit.variance_source != "none"
+
+    def correction_vectors(self) -> np.ndarray:
+        return -self.reference_unbalance[0]
+
+    def _t(self, dof) -> np.ndarray:
+        """Student-t quantiles for degrees of freedom (array); the fit's own without repeats."""
+        if self.fit.variance_source != "repeats":
+            return np.full(np.shape(dof), self.tq)
+        return np.vectorize(t_quantile)(np.asarray(dof, dtype=float))
+
+    def _unb_dict(self, U, cov, c) -> dict:
+        out = {}
+        tq = self._t(self.fit.unbalance_dof(c, U))
+        for j, name in enumerate(self.fit.campaign.plane_names):
+            a, ang, ca, cd = _polar_ci(U[j], float(np.real(cov[j, j])), float(tq[j]), self.phase)
+            out[name] = {"g_mm": a, "angle_deg": ang, "ci95_g_mm": ca if self.intervals else None,
+                         "ci95_deg": cd if self.intervals else None}
+        return out
+
+    def to_dict(self) -> dict:
+        fit, camp, data = self.fit, self.fit.campaign, self.fit.data
+        S, P, J = fit.H.shape
+        unit = data.amp_unit
+        influence = []
+        t_cell = self._t(fit.cell_dof) if fit.cell_dof is not None else np.full((S, P), self.tq)
+        for s in range(S):
+            for p in range(P):
+                for j, plane in enumerate(camp.plane_names):
+                    a, ang, ca, cd = _polar_ci(fit.H[s, p, j], float(np.real(fit.cov_theta[s, p, 1 + j, 1 + j])),
+                                               float(t_cell[s, p]), self.phase)
+                    influence.append({"rpm": float(data.rpm[s]), "probe": data.probes[p], "plane": plane,
+                                      "amp_per_g_mm": a, "angle_deg": ang,
+                                      "ci95_amp_per_g_mm": ca if self.intervals else None,
+                                      "ci95_deg": cd if self.intervals else None})
+        runs = {}
+        for k, run in enumerate(data.runs):
+            U, cov = self.unbalance[run]
+            cells = [c for c in self.influence_misfit.get("cells", []) if c["run"] == run]
+            one = self.unbalance_misfit.get("runs", {}).get(run, {})
+            runs[run] = {
+                "reference": run == camp.reference,
+                "trial": {pl: {"mass_g": m, "angle_deg": a} for pl, (m, a) in camp.weights.get(run, {}).items()},
+                "unbalance": self._unb_dict(U, cov, fit.run_combination(k)),
+                "misfit": {"influence": cells, "one_unbalance": one,
+                           "flagged": any(c["flagged"] for c in cells) or any(v["flagged"] for v in one.values())},
+            }
+        C = self.correction_vectors()
+        Uref, covref = self.reference_unbalance
+        correction = {}
+        c0 = fit.reference_combination()
+        t_ref = self._t(fit.unbalance_dof(c0, Uref))
+        for j, pl in enumerate(camp.planes):
+            m, ang = weight_of(C[j], pl.radius_mm, self.phase)
+            _, _, ca, cd = _polar_ci(C[j], float(np.real(covref[j, j])), float(t_ref[j]), self.phase)
+            correction[pl.name] = {"mass_g": m, "angle_deg": ang, "g_mm": abs(C[j]),
+                                   "ci95_mass_g": ca / pl.radius_mm if self.intervals else None,
+                                   "ci95_deg": cd if self.intervals else None, "radius_mm": pl.radius_mm,
+                                   "holes": split_to_holes(m, ang, pl.holes, pl.first_hole_deg) if pl.holes else None}
+        R, Rvar = self.residual
+        X0 = fit.X0
+        predicted = []
+        t_res = self._t(fit.residual_dof(c0, Uref))
+        for s in range(S):
+            for p in range(P):
+                a, ang, ca, _ = _polar_ci(R[s, p], float(Rvar[s, p]), float(t_res[s, p]), self.phase)
+                b, bang = to_phase(np.array([X0[s, p]]), self.phase)
+                predicted.append({"rpm": float(data.rpm[s]), "probe": data.probes[p], "amp": a, "phase_deg": ang,
+                                  "ci95_amp": ca if self.intervals else None, "before_amp": float(b[0]),
+                                  "before_phase_deg": float(bang[0])})
+        iso = None
+        if camp.rotor_mass_kg is not None and camp.service_rpm is not None:
+            before = float(np.sum(np.abs(Uref)))
+            after = float(np.sum(t_ref * np.sqrt(np.real(np.diag(covref)) / 2))) if self.intervals else None
+            iso = {"rotor_mass_kg": camp.rotor_mass_kg, "service_rpm": camp.service_rpm,
+                   "before": iso_grade(before, camp.rotor_mass_kg, camp.service_rpm),
+                   "after_ci95": iso_grade(after, camp.rotor_mass_kg, camp.service_rpm) if after is not None else None,
+                   "note": "before: the reference's unbalance (sum over planes); after: the 95 % bound of what the "
+                           "correction leaves (its uncertainty), if the model holds"}
+        im, um = self.influence_misfit, self.unbalance_misfit
+        trusted = not (im.get("flagged") or um.get("flagged"))
+        return {
+            "source": data.source,
+            "runs_file": camp.source,
+            "amplitude_unit": unit,
+            "phase_convention": self.phase,
+            "angle_convention": ANGLE_CONVENTION[self.phase],
+            "planes": {p.name: {"radius_mm": p.radius_mm, "holes": p.holes, "first_hole_deg": p.first_hole_deg}
+                       for p in camp.planes},
+            "probes": list(data.probes),
+            "speeds_rpm": [float(v) for v in data.rpm],
+            "reference": camp.reference,
+            "condition_number": fit.condition_number,
+            "calibration_condition_number": fit.calibration_condition_number,
+            "variance": {"source": fit.variance_source, "dof": fit.dof,
+                         "reference_unbalance_dof": [float(v) for v in np.atleast_1d(fit.unbalance_dof(c0, Uref))]
+                         if fit.variance_source == "repeats" else None},
+            "intervals_cover": COVERS,
+            "visibility": self.visibility,
+            "influence": influence,
+            "runs": runs,
+            "correction": correction,
+            "predicted_residual": predicted,
+            "misfit": {"linear_model_trusted": trusted,
+                       "influence": {k: v for k, v in im.items() if k != "cells"},
+                       "one_unbalance": {k: v for k, v in um.items() if k != "runs"}},
+            "iso_21940_11": iso,
+            "model_based": self.model_based,
+            "notes": list(self.notes) + list(data.notes),
+        }
+
+    def to_json(self, **kwargs) -> str:
+        return json.dumps(_jsonable(self.to_dict()), **kwargs)
+
+    def summary(self) -> str:
+        d = self.to_dict()
+        u = d["amplitude_unit"]
+        lines = [f"balancing: {d['source']} ({len(d['speeds_rpm'])} speed(s), {len(d['probes'])} probe(s), "
+                 f"{len(d['runs'])} runs, planes {', '.join(d['planes'])})",
+                 f"condition number {d['condition_number']:.3g} (calibration design {d['calibration_condition_number']:.3g});"
+                 f" scatter from {d['variance']['source']} ({d['variance']['dof']} dof)",
+                 f"angles: {d['angle_convention']}"]
+        for run, r in d["runs"].items():
+            parts = []
+            for pl, v in r["unbalance"].items():
+                ci = f" ± {v['ci95_g_mm']:.3g} g·mm / ± {v['ci95_deg']:.2g} deg" if v["ci95_g_mm"] is not None else ""
+                parts.append(f"{pl} {v['g_mm']:.4g} g·mm at {v['angle_deg']:.0f} deg{ci}")
+            flag = "  << misfit" if r["misfit"]["flagged"] else ""
+            lines.append(f"run {run}{' (reference)' if r['reference'] else ''}: unbalance " + "; ".join(parts) + flag)
+        for pl, c in d["correction"].items():
+            ci = f" (± {c['ci95_mass_g']:.3g} g, ± {c['ci95_deg']:.2g} deg)" if c["ci95_mass_g"] is not None else ""
+            lines.append(f"correction {pl}: {c['mass_g']:.4g} g at {c['angle_deg']:.1f} deg, radius "
+                         f"{c['radius_mm']:g} mm{ci}")
+            for h in c["holes"] or []:
+                lines.append(f"    hole {h['hole']} ({h['angle_deg']:.1f} deg): {h['mass_g']:.4g} g")
+        before = max(p["before_amp"] for p in d["predicted_residual"])
+        after = max(p["amp"] for p in d["predicted_residual"])
+        lines.append(f"vibration: largest 1X {before:.4g} {u} before, {after:.4g} {u} predicted after correction")
+        if d["iso_21940_11"]:
+            iso = d["iso_21940_11"]
+            after_txt = (f", after (95 % bound) {iso['after_ci95']['grade']} (G = {iso['after_ci95']['G_mm_per_s']:.3g})"
+                         if iso["after_ci95"] else "")
+            lines.append(f"ISO 21940-11: before {iso['before']['grade']} (G = {iso['before']['G_mm_per_s']:.3g} "
+                         f"mm/s){after_txt}")
+        m = d["misfit"]
+        if m["linear_model_trusted"]:
+            lines.append("misfit: none beyond the scatter (the linear influence model holds"
+                         + ("" if m["influence"].get("testable") else "; " + m["influence"].get("reason", "")) + ")")
+        else:
+            lines.append("misfit: the linear influence model does NOT hold (do not trust the correction as it is)")
+            for title, part, bad in (
+                    ("runs the influence model X0 + H W does not explain (the response not proportional to the weight)", m["influence"],
+                     m["influence"].get("flagged")),
+                    ("no single unbalance explains every speed and probe of run(s) "
+                     + ", ".join(m["one_unbalance"].get("flagged", [])), m["one_unbalance"],
+                     m["one_unbalance"].get("flagged"))):
+                if not bad:
+                    continue
+                lines.append(f"  {title}:")
+                for ev in part.get("evidence", []):
+                    lines.append(f"    - {ev['text']}")
+                for e in part.get("explanations", []):
+                    if e.get("testable"):
+                        lines.append(f"    tried {e['explanation']}: "
+                                     + ("removes it: " + e["meaning"] if e["removes_misfit"] else "does not remove it"))
+                    else:
+                        lines.append(f"    {e['explanation']}: not testable ({e['reason']})")
+                if not part.get("explained_by"):
+                    tried = [e for e in part.get("explanations", []) if e.get("testable")]
+                    if not tried and part.get("explanations"):
+                        lines.append("    no explanation could be tested (reasons above)")
+                    else:
+                        lines.append("    no explanation tried removes it" + (
+                            ": a non-linear rotor (rub, clearance, loose part) is left" if part is m["influence"]
+                            else ""))
+        if d["model_based"]:
+            mb = d["model_based"]
+            lines.append(f"model-based (one run-up of {mb['run']}, no trial weight): {mb['g_mm']:.4g} g·mm at "
+                         f"{mb['angle_deg']:.0f} deg")
+        lines += [f"note: {n}" for n in d["notes"]]
+        return "\n".join(lines)
+
+    # ---------------------------------------------------------------- figures
+    def plot_polar(self, ax=None):
+        """Polar plot: every run's mean vector per probe (first speed ... last), the influence
+        of each plane's trial weight, and the predicted vibration after correction."""
+        import matplotlib.pyplot as plt
+
+        fit, data = self.fit, self.fit.data
+        S, P, J = fit.H.shape
+        fig, axes = plt.subplots(1, P, subplot_kw={"projection": "polar"}, figsize=(4.2 * P, 4.4), squeeze=False)
+        unit = "µm" if data.amp_unit == "um" else data.amp_unit
+        s = int(np.argmax(np.abs(fit.X0).max(axis=1)))
+        R = self.residual[0]
+        for p in range(P):
+            ax = axes[0, p]
+            ax.set_theta_zero_location("N")
+            ax.set_theta_direction(-1 if self.phase == "lag" else 1)
+            for k, run in enumerate(data.runs):
+                amp, ang = to_phase(data.Y[k, :, p], self.phase)
+                ax.plot(np.radians(ang), amp, "o-", ms=4, lw=0.8, label=run)
+            for j, plane in enumerate(fit.campaign.plane_names):
+                kk = int(np.argmax(np.abs(fit.W[:, j])))
+                tip = fit.X0[s, p] + fit.H[s, p, j] * fit.W[kk, j]
+                a0, g0 = to_phase(np.array([fit.X0[s, p], tip]), self.phase)
+                ax.annotate("", xy=(np.radians(g0[1]), a0[1]), xytext=(np.radians(g0[0]), a0[0]),
+                            arrowprops={"arrowstyle": "->", "lw": 1.4})
+                ax.text(np.radians(g0[1]), a0[1], f" H·W {plane}", fontsize=8)
+            ar, gr = to_phase(R[:, p], self.phase)
+            ax.plot(np.radians(gr), ar, "k*", ms=8, label="after correction (predicted)")
+            ax.set_title(f"{data.probes[p]}: 1X [{unit}], phase {self.phase} [deg]", fontsize=9)
+        axes[0, 0].legend(fontsize=7, loc="lower left", bbox_to_anchor=(-0.25, -0.2))
+        fig.suptitle(f"1X vectors per run; arrows: each plane's trial-weight effect at {data.rpm[s]:.0f} rpm", y=1.04)
+        return fig
+
+    def plot_bode(self, ax=None):
+        """Bode-style: 1X amplitude and phase against speed, before and predicted after correction."""
+        import matplotlib.pyplot as plt
+
+        fit, data = self.fit, self.fit.data
+        P = len(data.probes)
+        fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5.5))
+        unit = "µm" if data.amp_unit == "um" else data.amp_unit
+        R, Rvar = self.residual
+        for p in range(P):
+            a0, g0 = to_phase(fit.X0[:, p], self.phase)
+            a1, g1 = to_phase(R[:, p], self.phase)
+            line, = axes[0].plot(data.rpm, a0, "o-", label=f"{data.probes[p]} before (reference)")
+            axes[0].errorbar(data.rpm, a1, yerr=self.tq * np.sqrt(Rvar[:, p] / 2) if self.intervals else None,
+                             fmt="s--", color=line.get_color(), label=f"{data.probes[p]} predicted after")
+            axes[1].plot(data.rpm, g0, "o-", color=line.get_color())
+            axes[1].plot(data.rpm, g1, "s--", color=line.get_color())
+        axes[0].set_ylabel(f"1X amplitude [{unit}]")
+        axes[1].set_ylabel(f"phase {self.phase} [deg]")
+        axes[1].set_xlabel("speed [rpm]")
+        axes[1].set_ylim(0, 360) if self.phase == "lag" else axes[1].set_ylim(-180, 180)
+        axes[0].legend(fontsize=8)
+        axes[0].set_title("before and predicted after the correction (bars: 95 % intervals)")
+        return fig
+
+    def figures(self) -> dict:
+        return {"polar": self.plot_polar(), "bode": self.plot_bode()}
+
+    def report(self, path, *, overwrite: bool = False):
+        """A self-contained HTML report: summary, correction, misfit, figures."""
+        import base64
+        import html
+        import io
+
+        import matplotlib.pyplot as plt
+
+        from ..outputs import atomic_write_text, check_writable
+
+        path = check_writable(path, overwrite=overwrite)
+        imgs = []
+        for name, fig in self.figures().items():
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+            plt.close(fig)
+            imgs.append(f'<h2>{html.escape(name)}</h2><img alt="{html.escape(name)}" style="max-width:100%" '
+                        f'src="data:image/png;base64,{base64.b64encode(buf.getvalue()).decode()}">')
+        d = self.to_dict()
+        def ci(c: dict) -> str:
+            return "" if c["ci95_mass_g"] is None else f"± {c['ci95_mass_g']:.3g} g, ± {c['ci95_deg']:.0f} deg"
+
+        rows = "".join(f"<tr><td>{html.escape(pl)}</td><td>{c['mass_g']:.4g}</td><td>{c['angle_deg']:.1f}</td>"
+                       f"<td>{ci(c)}</td></tr>" for pl, c in d["correction"].items())
+        trusted = d["misfit"]["linear_model_trusted"]
+        verdict = "linear model holds" if trusted else "linear model does NOT hold: see the misfit"
+        doc = ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>rotor-id: balancing</title>"
+               "<style>body{font-family:sans-serif;max-width:1000px;margin:auto}td,th{border:1px solid #bbb;"
+               "padding:3px 8px}table{border-collapse:collapse}</style></head><body>"
+               "<h1>rotor-id balancing (influence coefficients)</h1>"
+               f"<section class='verdict verdict-{'explained' if trusted else 'unexplained'}'><p><b>"
+               f"{html.escape(verdict)}</b></p></section>"
+               "<h2>Correction</h2><table><tr><th>plane</th><th>mass [g]</th>"
+               f"<th>angle [deg, {html.escape(d['phase_convention'])}]</th><th>95 %</th></tr>{rows}</table>"
+               f"<p>{html.escape(d['angle_convention'])}. {html.escape(COVERS)}.</p>"
+               f"<h2>Summary</h2><pre>{html.escape(self.summary())}</pre>" + "".join(imgs) + "</body></html>")
+        return atomic_write_text(path, doc, overwrite=overwrite)
