@@ -258,7 +258,10 @@ def train(
     model_features = model_features if identifier else "none"
     venv = VecNormalize(_vec_env(env_id, identifier, n_envs, seed, model_features, residual, vec_env),
                         norm_obs=True, norm_reward=True)
-    eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed, model_features, residual),
+    # the eval env is built as the training env is (EvalCallback syncs the normalisation
+    # statistics wrapper by wrapper: a VecMonitor on one side only fails); both kinds run
+    # the same episodes step for step
+    eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed, model_features, residual, vec_env),
                             norm_obs=True, norm_reward=False, training=False)
     cls = {"ppo": PPO, "sac": SAC}[algo]
     model = cls(policy, venv, seed=seed, verbose=0, device="cpu", **hp)
