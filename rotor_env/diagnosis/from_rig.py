@@ -90,7 +90,19 @@ class RigDiagnosis:
         lines.append("1X vectors: " + self.vectors.summary().replace("\n", "\n  "))
         lines.append("")
         lines.append("waveforms: " + self.diagnosis.summary().replace("\n", "\n  "))
+        lines.append("")
+        lines.append(self._rms_line())
         return "\n".join(lines)
+
+    def _rms_line(self) -> str:
+        """The waveforms' equation-error RMS in the rig's unit (the summary above is dimensionless)."""
+        d = self.diagnosis.to_dict()
+        s, unit = self.unit_scale, self.rms_unit
+        parts = [f"{label} {d[key] * s:.4g} {unit}" for key, label in
+                 (("rms_before", "starting model"), ("rms_after", "final model"), ("noise_floor", "noise floor"))
+                 if d.get(key) is not None and math.isfinite(d[key])]
+        return ("waveforms' equation-error RMS as an equivalent static deflection: " + ", ".join(parts)
+                if parts else "waveforms' equation-error RMS: not available")
 
     def report(self, path, *, overwrite: bool = False):
         """The waveform diagnosis's report (in s and rpm), with the 1X vectors' section first."""
