@@ -187,11 +187,9 @@ def evaluate(env_id: str, episodes: int = 50, agents: dict | None = None, progre
     if not agents:
         raise ValueError("nothing to evaluate: give --model or keep the baselines")
     results, stats = {}, {}
-    pbar = None
-    if progress:
-        from tqdm.auto import tqdm
+    from rotor_env.progress import bar
 
-        pbar = tqdm(total=episodes * len(agents), desc="evaluating", unit="episode", leave=False)
+    pbar = bar(f"evaluating {len(agents)} agents", episodes * len(agents), "episodes", enabled=progress)
     for name, (agent, sees_identifier) in agents.items():
         rows = []
         for i in range(episodes):

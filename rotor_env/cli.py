@@ -602,11 +602,21 @@ def _unavailable(args, exc) -> int:
     return 2
 
 
+#: commands without progress lines: the monitor streams its own status lines
+QUIET_COMMANDS = frozenset({"monitor"})
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        if args.command in QUIET_COMMANDS:
+            return int(args.func(args) or 0)
+        from .progress import Progress
+
+        # a bar in a terminal, a line on stderr every ~10 s otherwise (rotor_env/progress.py)
+        with Progress(f"rotor-id {args.command}"):
+            return int(args.func(args) or 0)
     except (_UsageError, ValueError, OSError) as exc:
         print(f"rotor-id {args.command}: error: {exc}", file=sys.stderr)
         return 2

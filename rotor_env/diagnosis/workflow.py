@@ -94,6 +94,9 @@ def diagnose(
     if ip is not None and not (math.isfinite(ip) and 0 <= ip < 1):
         raise ValueError(f"ip must be a number in [0, 1), got {float(ip)!r}")
     model = _as_model(model)
+    from ..progress import step
+
+    step("checking the data: excitation, time scale, ip")
     if candidates is None:
         candidates = [c for c in LIBRARY_CANDIDATES if c not in model]
     else:
@@ -152,11 +155,9 @@ def diagnose(
         data.ip_uncertainty = 1.96 * ip_se if ip is None else 0.0
     except NotIdentifiable as exc:
         return NotIdentifiableResult(source=measurements.source, reason=str(exc), ip=ip, notes=notes)
-    pbar = None
-    if progress:
-        from tqdm.auto import tqdm
+    from ..progress import bar
 
-        pbar = tqdm(total=max_rounds, desc="diagnosing", unit="round", leave=False)
+    step("fitting the starting model")
     current = compare(data, model.effects, _known(model.effects))
     before = current
     floor = estimate_noise_floor(data, before)
@@ -168,10 +169,13 @@ def diagnose(
     while remaining and len(rounds) < max_rounds:
         if floor > 0 and current.rms < floor and not data.noisy:
             break  # noise-free data below the numerical floor: what is left is round-off
+        pbar = bar(f"round {len(rounds) + 1}: ranking the candidates", len(remaining), "candidates",
+                   enabled=progress)
         ranked = _rank(data, current, remaining, _known(current.model), alpha, min_fit_gain, min_energy_drop)
-        rounds.append(ranked)
         if pbar is not None:
-            pbar.update(1)
+            pbar.close()
+        rounds.append(ranked)
+        step(f"round {len(rounds)}: checking the best candidates")
         chosen = _choose(data, current, ranked, floor, alpha)
         if chosen is None:
             break
@@ -184,8 +188,7 @@ def diagnose(
             current = _appears_or_changes(data, current, chosen.effect, alpha, min_energy_drop)
         steps.append(current)
         remaining.remove(chosen.effect)
-    if pbar is not None:
-        pbar.close()
+    step("onsets, robust statistics and the verdict")
     onset = {
         e: current.onsets.get(e)
         if e in current.onsets
