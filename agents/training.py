@@ -184,10 +184,18 @@ def progress_lines(total_steps: int, every_s: float = 10.0, stream=None, eval_ca
             if self.command is not None:
                 self.command.step("training", total_steps, "steps")
 
+        def _report(self) -> None:
+            self.command.advance(self.num_timesteps - self.reported)
+            self.reported = self.num_timesteps
+
+        def _on_rollout_start(self) -> None:
+            # steps count as done once their rollout's network update is done too: the
+            # rate (and the time left) then include the updates
+            if self.command is not None:
+                self._report()
+
         def _on_step(self) -> bool:
             if self.command is not None:
-                self.command.advance(self.num_timesteps - self.reported)
-                self.reported = self.num_timesteps
                 r = getattr(eval_callback, "last_mean_reward", None)
                 if r is not None and np.isfinite(r):
                     self.command.note = f"last evaluation: mean reward {r:.4g}"
@@ -215,6 +223,8 @@ def progress_lines(total_steps: int, every_s: float = 10.0, stream=None, eval_ca
         def _on_training_end(self) -> None:
             if self.command is None:
                 self._line(final=True)
+            else:
+                self._report()
 
     return ProgressLines()
 

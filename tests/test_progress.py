@@ -111,3 +111,27 @@ def test_diagnose_prints_its_steps_on_a_pipe(tmp_path):
     assert any("ranking the candidates" in ln for ln in lines), proc.stderr
     assert any(" s left in this step" in ln for ln in lines), proc.stderr
     assert lines[-1].startswith("rotor-id diagnose: done after ")
+
+
+def test_training_steps_count_once_their_update_is_done(tmp_path, monkeypatch):
+    """The train step's time left includes the network updates: at 100 % nothing is left."""
+    pytest.importorskip("stable_baselines3")
+    from agents.training import train
+
+    (tmp_path / "hp.yml").write_text("rotor_env/RotorRunUp-v0:\n  ppo:\n    n_envs: 2\n    n_steps: 32\n"
+                                     "    batch_size: 64\n    n_epochs: 1\n    policy_kwargs: {net_arch: [8]}\n")
+    out = io.StringIO()
+    seen = []
+    with Progress("rotor-id train", stream=out, every=1e9, terminal=False) as p:
+        original = p.advance
+
+        def advance(n=1):
+            original(n)
+            seen.append(p.done)
+
+        monkeypatch.setattr(p, "advance", advance)
+        train("rotor_env/RotorRunUp-v0", "ppo", 128, identifier=False, out=tmp_path / "run",
+              hyperparams=tmp_path / "hp.yml", eval_freq=10_000, eval_episodes=1, progress=False)
+        assert p.what == "training" and p.total == 128
+    # reported at each rollout's start (the update before it done) and at the end: 0, 64, 128
+    assert [s for s in seen if s] == [64, 128], seen
