@@ -576,10 +576,13 @@ class DiagnosisFigures:
             else:
                 parts.append("<p>No band of time stands above the floor.</p>")
         rows = "".join(
-            f"<tr><td>{_e(r.get('effect', ''))}</td><td>{_e(r.get('rule', ''))}</td></tr>" for r in self.rejected
-        ) or "<tr><td colspan=2>none</td></tr>"
+            f"<tr><td>{_e(r.get('effect', ''))}</td><td>{_e(r.get('rule', ''))}</td>"
+            + (f"<td>{_e(r['round'])}</td>" if r.get("round") else "") + "</tr>"
+            for r in self.rejected
+        ) or "<tr><td colspan=3>none</td></tr>"
         parts.append("<h3>Candidates turned down</h3>"
-                     f"<table class='rejected'><tr><th>effect</th><th>rule that rejected it</th></tr>{rows}</table>")
+                     "<table class='rejected'><tr><th>effect</th><th>rule that rejected it</th>"
+                     f"<th>round (the last that tried it)</th></tr>{rows}</table>")
         if self.notes:
             items = "".join(f"<li>{_e(n)}</li>" for n in self.notes)
             parts.append(f"<h3>Notes</h3><ul class='notes'>{items}</ul>")
@@ -672,10 +675,14 @@ class DiagnosisFigures:
         def img(name):
             return f'<img alt="{name}" src="data:image/png;base64,{imgs[name]}">'
 
+        from .result import _fit_cell
+
+        decided = self.decisions()
         cand_rows = "".join(
             f"<tr class='{'missing' if c.effect in self.missing else ''}'><td>{_e(c.effect)}</td><td>{c.F:.4g}</td>"
-            f"<td>{c.log10_p:.4g}</td><td>{c.rms_after:.4g}</td><td>{c.fit_percent_after:.1f}</td>"
-            f"<td>{c.correlation:.2f}</td><td>{c.order_overlap:.2f}</td><td>{html.escape(c.story)}</td></tr>"
+            f"<td>{c.log10_p:.4g}</td><td>{c.rms_after:.4g}</td><td>{_fit_cell(c)}</td>"
+            f"<td>{c.correlation:.2f}</td><td>{c.order_overlap:.2f}</td><td>{_e(decided.get(c.effect, 'not decided'))}</td>"
+            f"<td>{html.escape(c.story)}</td></tr>"
             for c in self.candidates
         )
         win_rows = "".join(
@@ -725,7 +732,7 @@ p.verdict-word{{font-size:2em;font-weight:bold;margin:.2em 0}}
 <p>Windows where the residual stands above the noise floor ({self.noise_floor:.3g}):</p>
 <table><tr><th>t start</th><th>t end</th><th>peak RMS / floor</th></tr>{win_rows}</table>
 <h2>Which effect is missing</h2>{img('candidates')}
-<table><tr><th>effect</th><th>F</th><th>log10 p</th><th>RMS after</th><th>fit % after</th><th>corr.</th><th>order overlap</th><th>physical story</th></tr>{cand_rows}</table>
+<table><tr><th>effect</th><th>F</th><th>log10 p</th><th>RMS after</th><th>fit % after</th><th>corr.</th><th>order overlap</th><th>decision (round)</th><th>physical story</th></tr>{cand_rows}</table>
 <h2>Before and after</h2>{img('before_after')}
 <p>The final model's residual (shaded where it still stands above 2&times; the noise floor):</p>
 {img('residual_after')}

@@ -132,8 +132,10 @@ def diagnose(
         if not math.isfinite(ip_hat):
             raise NotIdentifiable("the gyroscopic moment is not excited (no speed or no rates)")
         ip_est = float(min(max(ip_hat, 0.0), 0.95))
+        ip_note = None  # the note of an estimate the widest model could not trust (revised below)
         if ip is None:
             ip_used = ip_est
+            ip_note = None if est.trusted else len(notes)
             notes.append(f"ip estimated from the data: {ip_hat:.4f} ± {1.96 * ip_se:.2g} (95 %)"
                          + ("" if est.trusted else
                             f"; uncertain: the widest library model leaves {est.rms_ratio:.1f}x the noise "
@@ -208,11 +210,17 @@ def diagnose(
                                  speed=data.meas.phi_dot)
     ratio = current.rms / floor if floor > 0 else math.inf
     verdict = verdict_of(bool(missing), ratio)
-    rejected: dict[str, str] = {}
-    for r in rounds:
+    if ip_note is not None and verdict in ("explained", "explained_after_adding"):
+        # the widest model's misfit was its own (every effect at once), not a fault outside
+        # the library: the final model, fitted with this ip, explains the record
+        notes[ip_note] = (f"ip estimated from the data: {ip_hat:.4f} ± {1.96 * ip_se:.2g} (95 %); the widest library "
+                          f"model (every effect at once) left {est.rms_ratio:.1f}x the noise floor, the final model "
+                          f"fitted with this ip explains the record ({ratio:.2g}x the floor)")
+    rejected: dict[str, tuple[int, str]] = {}
+    for k, r in enumerate(rounds, start=1):
         for c in r:
             if c.rejected_by is not None and c.effect not in missing:
-                rejected[c.effect] = c.rejected_by
+                rejected[c.effect] = (k, c.rejected_by)  # the last round that decided it
     return Diagnosis(
         source=measurements.source, ip=ip_used, alpha=alpha, equation=equation, t_start=data.t_start,
         start_model=model.effects, model=current.model, missing=missing, onset=onset, rounds=rounds,
@@ -220,7 +228,7 @@ def diagnose(
         verdict=verdict, rms_ratio_after=ratio, rms_ratio_before=before.rms / floor if floor > 0 else math.inf,
         unexplained=describe_unexplained(data, current, floor) if verdict in ("partly_explained", "unexplained")
         else None,
-        rejected=[{"effect": e, "rule": rule} for e, rule in rejected.items()],
+        rejected=[{"effect": e, "rule": rule, "round": k} for e, (k, rule) in rejected.items()],
         ip_estimate=ip_hat, ip_standard_error=ip_se, time_scale=time_scale, notes=notes,
         lookalikes=lookalikes,
     )
