@@ -151,8 +151,10 @@ class DiagnosisFigures:
         for x, y, style, label in curves:
             top.plot(x, y, label=label, **style)
         top.set_ylabel(u.label(r"amplitude $|\theta|$", u.amp_unit))
-        top.legend(fontsize=7, loc="upper left")
-        top.set_title("measured vs model response (free run)")
+        # above the axes, between them and the title: never over a curve (nor the zoom)
+        top.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.01), ncol=2, frameon=False,
+                   borderaxespad=0.0)
+        top.set_title("measured vs model response (free run)", pad=8 + 11 * ((len(curves) + 1) // 2))
         lo, hi = (float(v) for v in u.speed(np.array(self._critical_window())))
         if zoom and hi > lo:
             inset = top.inset_axes([0.62, 0.45, 0.36, 0.5])
@@ -338,7 +340,8 @@ class DiagnosisFigures:
         ax.plot(t, r0, lw=0.3, color="C3", label=f"starting model (RMS {self.before.rms:.3g})")
         ax.plot(t, r1, lw=0.3, color="C0", label=f"final model (RMS {self.after.rms:.3g})")
         ax.axhspan(-2 * self.noise_floor, 2 * self.noise_floor, color="0.5", alpha=0.25,
-                   label=f"2x noise floor ({self.noise_floor:.3g})")
+                   label=f"±2x the noise floor: the white-noise RMS of the residual, {self.noise_floor:.3g} "
+                   "(dimensionless moment)")
         ax.set_xlabel(u.label("t", u.time_unit))
         ax.set_ylabel("equation residual (dimensionless)")
         ax.legend(fontsize=7, loc="upper left", markerscale=4)
@@ -469,21 +472,45 @@ class DiagnosisFigures:
                                              equation=self.equation)
         return cache[key]
 
+    def monitor_alarms(self) -> list[dict] | None:
+        """The on-line monitor's calibrated alarms over the record with the final model's
+        effects (:func:`.field_plots.monitor_alarms`; model time), None where the monitor
+        cannot watch this model (an effect with a scanned parameter)."""
+        cache = self._field_cache()
+        if "alarms" not in cache:
+            try:
+                cache["alarms"] = fp.monitor_alarms(self.data.meas, self.model, self.ip)
+            except (ValueError, KeyError, NotImplementedError):
+                cache["alarms"] = None
+        return cache["alarms"]
+
     def plot_parameter_tracks(self, ax=None, truth: dict[str, float] | None = None,
                               forgetting: float | None = None):
-        """Parameter and significance tracks of the online identification; the batch
-        estimates of the diagnosis (95 % HAC) at the right end; ``truth`` (coefficient
-        name -> value) dashed for simulated data."""
+        """Parameter tracks of the online identification, with the on-line monitor's
+        calibrated alarms (the bottom panel: an effect from the onset of its change on);
+        the batch estimates of the diagnosis (95 % HAC) at the right end; ``truth``
+        (coefficient name -> value, or an array over the record; default: :attr:`truth`)
+        dashed for simulated data."""
         u = self.plot_units()
         tr = self.parameter_tracks(forgetting)
         final = {c: (float(v), 1.96 * float(s)) for c, v, s in
                  zip(self.after.columns, self.after.coefficients, self.after.standard_errors, strict=True)
                  if c in tr.coefficients}
-        fig = fp.plot_parameter_tracks(u.time(tr.t), tr.coefficients, significance=tr.significant, truth=truth,
-                                       groups=tr.groups, final=final, time_unit=u.time_unit, ax=ax)
+        truth = truth if truth is not None else getattr(self, "truth", None)
+        alarms = self.monitor_alarms()
+        if alarms is not None:
+            alarms = [{**a, "t_onset": float(u.time(a["t_onset"])), "t_alarm": float(u.time(a["t_alarm"]))}
+                      for a in alarms]
+            fig = fp.plot_parameter_tracks(u.time(tr.t), tr.coefficients, alarms=alarms, truth=truth,
+                                           groups=tr.groups, final=final, time_unit=u.time_unit, ax=ax)
+            marks = "dotted: onset of an alarm of the monitor's calibrated test"
+        else:  # the identifier's own flags (white-residual F tests), said so
+            fig = fp.plot_parameter_tracks(u.time(tr.t), tr.coefficients, significance=tr.significant,
+                                           truth=truth, groups=tr.groups, final=final, time_unit=u.time_unit, ax=ax)
+            marks = "bold where the effect-last F test (white residual) is significant"
         _first_axes(fig, ax).set_title(
-            f"online identification (recursive QR, forgetting {tr.forgetting:.5g}): bold where the effect is "
-            "significant; squares: batch estimate ± 95 %", fontsize=8)
+            f"online identification (recursive QR, forgetting {tr.forgetting:.5g}): {marks}; "
+            + ("dashed: truth; " if truth else "") + "squares: batch estimate ± 95 %", fontsize=8)
         return fig
 
     #: the figures :meth:`figures` draws, by file name

@@ -98,6 +98,9 @@ class Diagnosis(DiagnosisFigures):
     notes: list[str] = field(default_factory=list)
     #: per added effect: the evidence that told it from its lookalikes (see verdict.lookalike_evidence)
     lookalikes: list[dict] = field(default_factory=list)
+    #: the true coefficients where the data were simulated (coefficient -> a number, or an
+    #: array over ``data.meas.t``): drawn dashed in the parameter tracks (docs/PLOTS.md)
+    truth: dict | None = field(default=None, repr=False)
 
     @property
     def candidates(self) -> list[Candidate]:
