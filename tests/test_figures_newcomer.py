@@ -118,6 +118,18 @@ def test_diagnosis_figures_raise_no_user_warnings_and_keep_legends_off_the_curve
         starts = [c.get_paths()[0].vertices[:, 0].min() for c in a_sig.collections if c.get_paths()]
         assert starts and min(starts) >= 240.0, starts
         assert "monitor's calibrated" in a_sig.get_title()
+        # the order map: the added asymmetry's mirror of the free whirl, 2 - w_f/Omega, drawn
+        # where the residual sits (between 1x and 2x), and said in the legend
+        omap = figs["order_map"].axes[0]
+        mirror = [ln for ln in omap.lines if "mirrored" in str(ln.get_label())]
+        assert "asymmetry" in res.missing and len(mirror) == 1
+        speed, branches = res.whirl_model()
+        (e, m, s, order), = res._mirrored_whirl()
+        w_f = min((np.asarray(w) for w in branches.values() if np.nanmedian(w) > 0), key=np.nanmedian)
+        np.testing.assert_allclose(np.asarray(mirror[0].get_xdata(), float),
+                                   2 - np.interp(s, speed, w_f) / s, rtol=1e-9)
+        assert 1.0 < float(np.median(mirror[0].get_xdata())) < 2.0
+        assert "2Ω − ω" in omap.get_legend().get_title().get_text()
     finally:
         for f in figs.values():
             plt.close(f)

@@ -8,6 +8,7 @@ import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -234,14 +235,39 @@ class DiagnosisFigures:
                 continue
             for j, o in enumerate(declared):
                 ax.axvline(o, color=colour, label=label if j == 0 else None, **style)
-        if lines:
+        mirrored = self._mirrored_whirl()
+        for i, (name, m, speed_model, order) in enumerate(mirrored):
+            ax.plot(order, u.speed(speed_model), color=_LINE_COLOURS[(len(lines) + i) % len(_LINE_COLOURS)],
+                    ls="-.", lw=1.4, label=f"{name}: the free whirl ω mirrored to {m}x − ω/Ω")
+        if lines or mirrored:
             # below the axes (and their order label), so the map stays unhidden
-            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=min(3, len(lines)),
-                      title="expected order lines (solid: added, dashed: lookalike)", title_fontsize=7)
+            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16),
+                      ncol=min(3, len(lines) + len(mirrored)),
+                      title="expected order lines (solid: added, dashed: lookalike; dash-dot: a rotating "
+                      "asymmetry turns the free whirl ω into 2Ω − ω, between 1x and 2x)", title_fontsize=7)
         ax.set_xlabel("rotation order (+ forward, - backward)")
         ax.set_ylabel(u.label("speed", u.speed_unit))
         ax.set_title(f"order map of the {which}-model residual")
         return fig
+
+    #: effects whose moment mirrors a whirl ``z ~ e^{i w t}`` into ``e^{i (m Omega - w) t}``
+    #: (``conj(z) e^{i m phi}``): a rotating asymmetry (m = 2); its residual sits there, not at
+    #: its declared 1x/2x, when the record holds free whirl (the crack's opening excites it)
+    MIRRORING: ClassVar[dict[str, int]] = {"asymmetry": 2, "breathing_crack": 2}
+
+    def _mirrored_whirl(self) -> list[tuple[str, int, np.ndarray, np.ndarray]]:
+        """``(effect, m, speed, order)`` of each added mirroring effect: the order
+        ``m - w_f / Omega`` of the final model's forward free whirl ``w_f`` against speed."""
+        added = [(e, self.MIRRORING[e]) for e in self.missing if e in self.MIRRORING]
+        if not added:
+            return []
+        speed, branches = self.whirl_model()
+        forward = [np.asarray(w, float) for w in branches.values() if np.nanmedian(np.asarray(w, float)) > 0]
+        if not forward:
+            return []
+        w_f = min(forward, key=lambda w: float(np.nanmedian(w)))  # the lowest forward branch
+        keep = speed > 0.3 * float(np.nanmax(speed))  # Omega -> 0: the mirror runs off the map
+        return [(e, m, speed[keep], m - w_f[keep] / speed[keep]) for e, m in added]
 
     def _expected_lines(self, lookalikes: int = 2) -> list[tuple[str, tuple[float, ...], str]]:
         """``(effect, signed orders, "added" | "lookalike")`` for each added effect and up to
