@@ -133,3 +133,22 @@ def test_diagnosis_figures_raise_no_user_warnings_and_keep_legends_off_the_curve
     finally:
         for f in figs.values():
             plt.close(f)
+
+
+def test_waterfall_of_a_speed_that_dips_warns_nothing_and_draws_rows_by_speed():
+    """A rig's measured speed is not monotonic block by block: pcolormesh warned (a
+    UserWarning with a source path reached the user) and misplaced the cells."""
+    t = np.linspace(0.0, 400.0, 40001)
+    speed = 0.5 + 0.005 * t + 0.4 * np.sin(t / 15.0)  # rises with dips
+    phi = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))])
+    z = 0.01 * np.exp(1j * phi) + 0.002 * np.exp(2j * phi)
+    for x_axis in ("order", "frequency"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", UserWarning)
+            fig = fp.plot_waterfall(t, z, phi, x_axis=x_axis, speed_unit="dimensionless", amp_unit="rad")
+        try:
+            mesh = fig.axes[0].collections[0]
+            ys = mesh.get_coordinates()[:, 0, 1]  # the cell rows' speeds (edges), bottom to top
+            assert np.all(np.diff(ys) >= 0), "rows not in speed order"
+        finally:
+            plt.close(fig)

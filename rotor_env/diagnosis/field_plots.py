@@ -84,6 +84,14 @@ def _label(quantity: str, unit: str | None) -> str:
     return f"{quantity} ({unit})"
 
 
+def by_speed(speeds: np.ndarray, amp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of a spectrum map sorted by speed: a run's blocks need not be monotonic in
+    speed (a speed that dips, a rig's measured rpm), and matplotlib's ``pcolormesh``
+    then places the cells wrongly and warns (a ``UserWarning`` that reached the user)."""
+    order = np.argsort(np.asarray(speeds, dtype=float), kind="stable")
+    return np.asarray(speeds)[order], np.asarray(amp)[order] if np.ndim(amp) else amp
+
+
 def _alarm_spans(t: np.ndarray, alarms: Sequence[Mapping], groups) -> dict[str, np.ndarray]:
     """Effect -> bool over ``t``: from each "appeared"/"changed" alarm's onset to the
     effect's next alarm (a "disappeared" ends it) or the end of the record."""
@@ -435,6 +443,7 @@ def plot_waterfall(
         keep = orders >= 0
         amp = amp[:, keep] * np.where(orders[keep] > 0, 2.0, 1.0)
         orders = orders[keep]
+    speeds, amp = by_speed(speeds, amp)
     fps = _freq_per_speed(speed_unit)
     freq_unit = FREQUENCY_UNITS[speed_unit][0]
     if amp.size:

@@ -218,6 +218,7 @@ class DiagnosisFigures:
         m = self.data.meas
         u = self.plot_units()
         speeds, orders, amp = order_map(m.t, m.phi, u.speed(m.phi_dot), complex_rows(comp.residual, self.equation))
+        speeds, amp = fp.by_speed(speeds, amp)  # pcolormesh wants monotonic rows (else a UserWarning)
         if amp.size:
             mesh = ax.pcolormesh(orders, speeds, np.log10(amp + 1e-12), shading="nearest", cmap="viridis")
             fig.colorbar(mesh, ax=ax, label="log10 amplitude (dimensionless moment)")
