@@ -63,6 +63,20 @@ def default_agents(env_id: str, env, with_sb3: bool = True) -> dict[str, tuple[o
 
 METRICS = ("peak_amplitude", "rms_amplitude", "time_to_speed", "effort", "rub_rate", "return")
 
+#: Each metric's unit (the environments are dimensionless: docs/PHYSICS.md section 1.4, time
+#: ``t' = t sqrt(k/I_t)``, moments in units of ``k``); in the table's header and the JSON.
+METRIC_UNITS = {
+    "peak_amplitude": "rad",  # peak |theta| over the episode (disk inclination)
+    "rms_amplitude": "rad",
+    "time_to_speed": "t'",  # model time units
+    "effort": "u^2 t'",  # integral of the squared drive command (RunUp: phi'', Balancing: M_x^2 + M_y^2)
+    "rub_rate": "fraction",  # of the episodes ended by a rub
+    "return": "reward",
+}
+UNITS_NOTE = ("units: rad = disk inclination; t' = model time (t sqrt(k/I_t)); u^2 t' = integral of the squared "
+              "drive command (RunUp: phi'', Balancing: the correction moments M_x, M_y in units of k) over model "
+              "time; rub_rate = fraction of the episodes ended by a rub")
+
 
 def load_model(path: str | Path, env_id: str | None = None, name: str | None = None) -> tuple[str, object, bool]:
     """A model saved by ``rotor-id train`` (its folder, or the ``model.zip`` in it) as an
@@ -114,11 +128,9 @@ def evaluate(env_id: str, episodes: int = 50, agents: dict | None = None, progre
     if not agents:
         raise ValueError("nothing to evaluate: give --model or keep the baselines")
     results, stats = {}, {}
-    pbar = None
-    if progress:
-        from tqdm.auto import tqdm
+    from rotor_env.progress import bar
 
-        pbar = tqdm(total=episodes * len(agents), desc="evaluating", unit="episode", leave=False)
+    pbar = bar(f"evaluating {len(agents)} agents", episodes * len(agents), "episodes", enabled=progress)
     for name, (agent, sees_identifier) in agents.items():
         rows = []
         for i in range(episodes):
@@ -133,14 +145,16 @@ def evaluate(env_id: str, episodes: int = 50, agents: dict | None = None, progre
     env.close()
     return {"env": env_id, "episodes": episodes, "seeds": [seed0 + i for i in range(episodes)],
             "agents": results, "statistics": stats,
-            "interval": "95 % Student-t interval of the mean over the episodes", "versions": versions()}
+            "interval": "95 % Student-t interval of the mean over the episodes", "units": dict(METRIC_UNITS),
+            "versions": versions()}
 
 
 def format_table(result: dict) -> str:
     """Means; with the statistics, ``mean ± half-width of the 95 % interval``."""
     keys = METRICS
     stats = result.get("statistics", {})
-    lines = ["| agent | " + " | ".join(keys) + " |", "|---" * (len(keys) + 1) + "|"]
+    lines = ["| agent | " + " | ".join(f"{k} ({METRIC_UNITS[k]})" for k in keys) + " |",
+             "|---" * (len(keys) + 1) + "|"]
 
     def cell(name, k, v):
         if not math.isfinite(v):
@@ -150,4 +164,4 @@ def format_table(result: dict) -> str:
 
     for name, m in result["agents"].items():
         lines.append(f"| {name} | " + " | ".join(cell(name, k, m[k]) for k in keys) + " |")
-    return "\n".join(lines)
+    return "\n".join([*lines, "", UNITS_NOTE])

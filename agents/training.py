@@ -174,12 +174,31 @@ def progress_lines(total_steps: int, every_s: float = 10.0, stream=None, eval_ca
 
     from stable_baselines3.common.callbacks import BaseCallback
 
+    from rotor_env.progress import active
+
     class ProgressLines(BaseCallback):
         def _on_training_start(self) -> None:
             self.t0 = self.last = time.perf_counter()
-            self.start_steps = self.num_timesteps
+            self.start_steps = self.reported = self.num_timesteps
+            self.command = active()  # under rotor-id: its lines (rotor_env/progress.py) carry the steps
+            if self.command is not None:
+                self.command.step("training", total_steps, "steps")
+
+        def _report(self) -> None:
+            self.command.advance(self.num_timesteps - self.reported)
+            self.reported = self.num_timesteps
+
+        def _on_rollout_start(self) -> None:
+            # steps count as done once their rollout's network update is done too: the
+            # rate (and the time left) then include the updates
+            if self.command is not None:
+                self._report()
 
         def _on_step(self) -> bool:
+            if self.command is not None:
+                r = getattr(eval_callback, "last_mean_reward", None)
+                if r is not None and np.isfinite(r):
+                    self.command.note = f"last evaluation: mean reward {r:.4g}"
             return True
 
         def _line(self, final: bool = False) -> None:
@@ -194,13 +213,18 @@ def progress_lines(total_steps: int, every_s: float = 10.0, stream=None, eval_ca
                   f"{elapsed:.0f} s, {rate:.0f} steps/s{left}{evs}", file=stream or sys.stderr, flush=True)
 
         def _on_rollout_end(self) -> None:
+            if self.command is not None:
+                return
             now = time.perf_counter()
             if now - self.last >= every_s and self.num_timesteps - self.start_steps < total_steps:
                 self.last = now
                 self._line()
 
         def _on_training_end(self) -> None:
-            self._line(final=True)
+            if self.command is None:
+                self._line(final=True)
+            else:
+                self._report()
 
     return ProgressLines()
 
@@ -258,7 +282,10 @@ def train(
     model_features = model_features if identifier else "none"
     venv = VecNormalize(_vec_env(env_id, identifier, n_envs, seed, model_features, residual, vec_env),
                         norm_obs=True, norm_reward=True)
-    eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed, model_features, residual),
+    # the eval env is built as the training env is (EvalCallback syncs the normalisation
+    # statistics wrapper by wrapper: a VecMonitor on one side only fails); both kinds run
+    # the same episodes step for step
+    eval_env = VecNormalize(_vec_env(env_id, identifier, 1, EVAL_SEED + seed, model_features, residual, vec_env),
                             norm_obs=True, norm_reward=False, training=False)
     cls = {"ppo": PPO, "sac": SAC}[algo]
     model = cls(policy, venv, seed=seed, verbose=0, device="cpu", **hp)

@@ -6,14 +6,48 @@
 5001
 """
 
-from .diagnosis import Diagnosis, Model, diagnose, fit
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+# The effect library is light (numpy only) and registers the package's effects: imported now.
 from .effects import EFFECTS, PACKAGE_EFFECTS, Effect, Parameter, get_effect, register_effect
-from .io import MeasurementError, load_measurements
-from .measurements import COLUMNS, Measurements
-from .params import Crack, RotorParams
-from .regression import Regression, RegressionSpec, build_regression
-from .simulator import RunUp, SimulationError, Simulator, free_run, simulate
-from .wrappers import IdentificationWrapper, VectorIdentificationWrapper
+
+# Everything else is imported on first use (PEP 562), so that ``rotor-id --version`` or a
+# command that only simulates does not pay for scipy, numba and the diagnosis (~2 s).
+_LAZY: dict[str, str] = {
+    "Diagnosis": ".diagnosis", "Model": ".diagnosis", "diagnose": ".diagnosis", "fit": ".diagnosis",
+    "MeasurementError": ".io", "load_measurements": ".io",
+    "COLUMNS": ".measurements", "Measurements": ".measurements",
+    "Crack": ".params", "RotorParams": ".params",
+    "Regression": ".regression", "RegressionSpec": ".regression", "build_regression": ".regression",
+    "RunUp": ".simulator", "SimulationError": ".simulator", "Simulator": ".simulator",
+    "free_run": ".simulator", "simulate": ".simulator",
+    "IdentificationWrapper": ".wrappers", "VectorIdentificationWrapper": ".wrappers",
+}
+
+if TYPE_CHECKING:  # what static tools and IDEs see
+    from .diagnosis import Diagnosis, Model, diagnose, fit
+    from .io import MeasurementError, load_measurements
+    from .measurements import COLUMNS, Measurements
+    from .params import Crack, RotorParams
+    from .regression import Regression, RegressionSpec, build_regression
+    from .simulator import RunUp, SimulationError, Simulator, free_run, simulate
+    from .wrappers import IdentificationWrapper, VectorIdentificationWrapper
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value  # once: later look-ups are plain attribute reads
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
 
 __all__ = [
     "COLUMNS",
@@ -50,7 +84,7 @@ ENV_IDS: tuple[str, ...] = ("rotor_env/RotorRunUp-v0", "rotor_env/RotorBalancing
 
 
 def _register_envs() -> None:
-    # gymnasium is a dependency (the wrapper above imports it); entry points are strings
+    # gymnasium is a dependency; entry points are strings (the environments load on make)
     import gymnasium
 
     for env_id, module, name in (

@@ -54,7 +54,9 @@ def diagnose_file(file, *, model: str | None = None, ip: float | None = None, al
     from .measurements.rig import load_rig
     from .measurements.vectors import load_vector_table
     from .measurements.waveforms import load_waveforms
+    from .progress import step
 
+    step(f"reading {file}")
     if isinstance(rig, (str, bytes)) or hasattr(rig, "__fspath__"):
         rig = load_rig(rig)
     if not vectors and rig is None:
@@ -73,6 +75,7 @@ def diagnose_file(file, *, model: str | None = None, ip: float | None = None, al
         table = load_vector_table(file, amp_unit=amp_unit, phase=phase, angles=angles)
         names = model_list(model, VECTOR_MODEL) if model else list(VECTOR_MODEL)
         ip = rig.ip if rig is not None else (ip if ip is not None else 0.0)
+        step("1X table: fitting the run-up model's synchronous response, trying each effect")
         return diagnose_vectors(table, ip=ip, model=names, alpha=alpha, phase=phase,
                                 candidates=[c for c in VECTOR_CANDIDATES if c not in names])
     record = load_waveforms(file, rig)

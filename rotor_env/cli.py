@@ -285,6 +285,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     if args.vectors or args.rig:
         result = _diagnose_measured(args)
     else:
+        from .progress import step
+
+        step(f"reading {args.file}")
         meas, user = _load(args)
         model = model_list(args.model, DEFAULT_MODEL)
         candidates = [c for c in (*LIBRARY_CANDIDATES, *user) if c not in model]
@@ -549,11 +552,21 @@ def _unavailable(args, exc) -> int:
     return 2
 
 
+#: commands without progress lines: the monitor streams its own status lines
+QUIET_COMMANDS = frozenset({"monitor"})
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        if args.command in QUIET_COMMANDS:
+            return int(args.func(args) or 0)
+        from .progress import Progress
+
+        # a bar in a terminal, a line on stderr every ~10 s otherwise (rotor_env/progress.py)
+        with Progress(f"rotor-id {args.command}"):
+            return int(args.func(args) or 0)
     except (_UsageError, ValueError, OSError) as exc:
         print(f"rotor-id {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -404,6 +404,9 @@ def _run_on_ray(todo, options, workers, address, out, rec_dir, progress, say) ->
     import ray
     import ray.data
 
+    from .progress import step
+
+    step("starting Ray")
     started = init_ray(workers, address)
     logging.getLogger("ray.data").setLevel(logging.ERROR)  # its execution banners: the log lines are ours
     try:
@@ -426,7 +429,11 @@ def _collect(rows, total: int, out: Path, rec_dir: Path, reports: bool, progress
     from tqdm.auto import tqdm
 
     tty = sys.stderr.isatty() if progress is None else bool(progress)
-    bar = tqdm(total=total, desc="diagnosing", unit="recording", disable=not tty)
+    from .progress import active, step
+
+    # under the command the bar and the lines between the rows are rotor_env/progress.py's
+    step("diagnosing recordings", total, "recordings")
+    bar = tqdm(total=total, desc="diagnosing", unit="recording", disable=not tty or active() is not None)
     records, errors, t0, last = {}, 0, time.perf_counter(), 0.0
     for row in rows:
         record = _record(row)
@@ -438,6 +445,8 @@ def _collect(rows, total: int, out: Path, rec_dir: Path, reports: bool, progress
         errors += record["status"] != "ok"
         bar.update(1)
         bar.set_postfix(errors=errors)
+        if active() is not None:
+            active().advance(1)
         now = time.perf_counter() - t0
         if not tty and (now - last >= 10 or len(records) == total):  # log lines without a terminal
             last = now

@@ -92,6 +92,9 @@ def run_case(name: str, seed: int = 0, *, progress: bool = False) -> PaperCase:
     label, changes = CASES[name]
     params = RotorParams().replace(**changes)
     meas = simulate(params, t_end=400.0, dt=0.01, run_up=0.01, progress=progress)
+    from .progress import step
+
+    step(f"case {name}: online identification")
     reg = build_regression(meas, "paper", ip=params.ip, equation="first")
     rng = np.random.default_rng(seed)
     y = reg.y + rng.normal(0.0, NOISE_STD, size=reg.y.shape)
@@ -230,8 +233,14 @@ def plot_figures(cases: dict[str, PaperCase], out: Path) -> list[Path]:
 
 def run_paper(out: Path | None = None, seed: int = 0, progress: bool = False) -> dict[str, PaperCase]:
     """All four cases; with ``out``, write the figures and Table 2 there."""
-    cases = {name: run_case(name, seed=seed, progress=progress) for name in CASES}
+    from .progress import step
+
+    cases = {}
+    for name in CASES:
+        step(f"case {name} of {len(CASES)}")
+        cases[name] = run_case(name, seed=seed, progress=progress)
     if out is not None:
+        step("figures and Table 2")
         out.mkdir(parents=True, exist_ok=True)
         plot_figures(cases, out)
         write_tables(cases, out)

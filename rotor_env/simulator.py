@@ -438,12 +438,12 @@ class Simulator:
         k_crack = int(round(crack.time / dt)) if crack is not None else None
         if crack is not None and 0 < crack.time < t_end:
             breaks.add(k_crack)
-        if progress:
+        if progress:  # (not for the lines of a piped command: its file stays bit for bit the same)
             breaks.update(range(0, n_total, max(1, n_total // 100)))
         if n_total * every > CHUNK_STEPS:  # compiled calls of bounded length: Ctrl-C is heard
             breaks.update(range(0, n_total, max(1, CHUNK_STEPS // every)))
         breaks = sorted(b for b in breaks if b > 0)
-        pbar = _progress(n_total) if progress else None
+        pbar = _progress(n_total, enabled=progress)
         a = run_up.rate
         out[0] = self._row(0.0, run_up.phi0, run_up.speed0, a, state, control)
         k = 0
@@ -482,10 +482,10 @@ class Simulator:
         return np.array([t, phi, phid, a, *state, ax, ay])
 
 
-def _progress(total: int):
-    from tqdm.auto import tqdm
+def _progress(total: int, enabled: bool = True):
+    from .progress import bar
 
-    return tqdm(total=total, unit="sample", desc="simulating", leave=False)
+    return bar("simulating", total, "samples", enabled=enabled)
 
 
 def simulate(

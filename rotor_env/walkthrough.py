@@ -24,6 +24,28 @@ START_MODEL = ("unbalance", "viscous_damping", "structural_damping")
 NOISE = 5e-4
 
 
+def true_coefficients(params: RotorParams, model, t) -> dict:
+    """The simulated rotor's regression coefficients of ``model``'s effects over ``t``
+    (constants, and a step where the crack opens): the parameter tracks' dashed truth.
+    An effect the rotor does not have is truly 0."""
+    import numpy as np
+
+    from .effects import EFFECTS
+
+    t = np.asarray(t, dtype=float)
+    out = {}
+    for name in model:
+        eff = EFFECTS[name]
+        if not all(p in params.values for p in eff.parameter_names):
+            out.update(dict.fromkeys(eff.coefficients, 0.0))
+            continue
+        before = params.coefficients(name)
+        after = params.coefficients(name, params.crack.time) if params.crack is not None else before
+        for c, b, a in zip(eff.coefficients, before, after, strict=True):
+            out[c] = float(b) if a == b else np.where(t >= params.crack.time, float(a), float(b))
+    return out
+
+
 def run_walkthrough(out: str | Path = "out/walkthrough", *, force: bool = False, seed: int = 1, print_fn=print):
     # --force replaces only the files a previous walkthrough wrote (listed in the folder's
     # marker); a folder with anything else in it is refused, force or not
@@ -38,6 +60,7 @@ def run_walkthrough(out: str | Path = "out/walkthrough", *, force: bool = False,
     print_fn(f"2. the engineer's model: {', '.join(START_MODEL)} (no crack)\n")
     print_fn("3. diagnosing ...\n")
     result = diagnose(meas, START_MODEL, ip=HIDDEN.ip)
+    result.truth = true_coefficients(HIDDEN, result.model, result.data.meas.t)
     print_fn(result.summary())
     for name in result.FIGURES:
         folder.file(f"figures/{name}.png")

@@ -7,6 +7,7 @@ bash scripts/setup.sh
 # the system package when it is absent and we may (root, apt). Without it the test skips,
 # except in CI (CI=true), where it fails.
 if ! command -v chromium >/dev/null && [ "$(id -u)" -eq 0 ] && command -v apt-get >/dev/null; then
+  echo "run-tests.sh: installing the system package chromium (apt-get) for the report's browser test" >&2
   (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
     || echo "run-tests.sh: warning: could not install chromium; the browser test will skip (fail in CI)" >&2
 fi

@@ -53,3 +53,14 @@ def test_ppo_trains_on_the_numba_vec_env(tmp_path):
     v = VecNormalize(make_numba_vec_env(RUN_UP, 2, seed=0))
     v.reset()
     assert v.num_envs == 2
+
+
+def test_ppo_on_the_numba_vec_env_evaluates_during_training(tmp_path):
+    """``rotor-id train --vec-env numba`` crashed at its first evaluation (the eval env's
+    wrappers differed from the training env's: SB3's normalisation sync failed)."""
+    (tmp_path / "hp.yml").write_text("rotor_env/RotorRunUp-v0:\n  ppo:\n    n_envs: 4\n    n_steps: 16\n"
+                                     "    batch_size: 64\n    n_epochs: 1\n    policy_kwargs: {net_arch: [8]}\n")
+    out = train(RUN_UP, "ppo", 64, identifier=False, out=tmp_path / "p", hyperparams=tmp_path / "hp.yml",
+                eval_freq=32, eval_episodes=1, progress=False, vec_env="numba", log_every_s=1e9)
+    evals = np.load(out / "eval" / "evaluations.npz")
+    assert len(evals["timesteps"]) >= 1 and np.isfinite(evals["results"]).all()

@@ -75,7 +75,7 @@ def test_undeclared_fault_json(files):
     assert 0.3 < top["share"] <= 1.0
     assert out["unexplained"]["bands"] and all(
         {"t_start", "t_end"} <= set(b) for b in out["unexplained"]["bands"])
-    assert all(set(r) == {"effect", "rule"} and r["rule"] for r in out["rejected"])
+    assert all(set(r) == {"effect", "rule", "round"} and r["rule"] and r["round"] >= 1 for r in out["rejected"])
     assert out["ip"] == 0.3
 
 

@@ -144,4 +144,4 @@ def test_report_renders_in_headless_chromium(report, tmp_path):
     for h in HEADINGS:
         assert h in dom.headings, f"heading {h!r} missing from the rendered page: {dom.headings}"
     assert "rotor-id diagnosis" in dom.headings
-    assert "asymmetry" in proc.stdout and "MISSING" in proc.stdout
+    assert "asymmetry" in proc.stdout and "added in round" in proc.stdout

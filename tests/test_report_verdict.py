@@ -129,10 +129,10 @@ def test_unexplained_run_shows_verdict_orders_and_rejected(tmp_path):
     assert len(bands) == len(d.unexplained["bands"]) > 0
     # every candidate turned down is named in the rejected table, with a rule
     assert d.rejected
-    rejected = {row[0]: row[1] for row in rep.tables["rejected"][1:]}
+    rejected = {row[0]: row[1:] for row in rep.tables["rejected"][1:]}
     for r in d.rejected:
         assert r["effect"] in rejected
-        assert rejected[r["effect"]] == r["rule"]
+        assert rejected[r["effect"]] == [r["rule"], str(r["round"])]
     # the verdict comes before the figures; the EIV bias column is there when it was removed
     assert text.index("id='verdict'") < text.index("<img")
     assert d.after.eiv_bias is not None

@@ -225,7 +225,10 @@ def rank_candidates(data: WindowData, base: Comparison, candidates: Sequence[str
     out = []
     n_cand = max(1, len(candidates))
     res_profile = _order_profile(data, base.residual)
-    for name in candidates:
+    from ..progress import advance
+
+    for i, name in enumerate(candidates):
+        advance(1 if i else 0)  # the one before is done (the step's rate: candidates per second)
         kn = {k: v for k, v in known.items() if k != name}
         null = EFFECTS[name].to_coefficients(known[name]) if name in known else None
         # a non-linear parameter (the rub's clearance) is scanned first, and the scan paid for
@@ -280,6 +283,7 @@ def rank_candidates(data: WindowData, base: Comparison, candidates: Sequence[str
             correlation=float(corr), order_overlap=overlap, onset=onset,
             story=f"{eff.cause}. Signature: {eff.signature}.", comparison=comp, scan=scan,
         ))
+    advance(1 if candidates else 0)
     out.sort(key=lambda c: (c.log10_p, -c.F))
     return out
 

@@ -85,6 +85,29 @@ def _label(quantity: str, unit: str | None) -> str:
     return f"{quantity} ({unit})"
 
 
+def by_speed(speeds: np.ndarray, amp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of a spectrum map sorted by speed: a run's blocks need not be monotonic in
+    speed (a speed that dips, a rig's measured rpm), and matplotlib's ``pcolormesh``
+    then places the cells wrongly and warns (a ``UserWarning`` that reached the user)."""
+    order = np.argsort(np.asarray(speeds, dtype=float), kind="stable")
+    return np.asarray(speeds)[order], np.asarray(amp)[order] if np.ndim(amp) else amp
+
+
+def _alarm_spans(t: np.ndarray, alarms: Sequence[Mapping], groups) -> dict[str, np.ndarray]:
+    """Effect -> bool over ``t``: from each "appeared"/"changed" alarm's onset to the
+    effect's next alarm (a "disappeared" ends it) or the end of the record."""
+    names = list(groups or {}) or sorted({a["effect"] for a in alarms})
+    out = {e: np.zeros(len(t), dtype=bool) for e in names}
+    for e in names:
+        mine = sorted((a for a in alarms if a["effect"] == e), key=lambda a: a["t_onset"])
+        for i, a in enumerate(mine):
+            if a["event"] == "disappeared":
+                continue
+            end = mine[i + 1]["t_onset"] if i + 1 < len(mine) else np.inf
+            out[e] |= (t >= a["t_onset"]) & (t < end)
+    return out
+
+
 def _axes(ax, n: int, figsize=(8, 4), **kw):
     """``(figure, [axes])``: the caller's axes (one, or a sequence of ``n``) or a new figure
     with ``n`` rows."""
@@ -122,7 +145,7 @@ def order_vectors(
 
 
 def phase_deg(X: np.ndarray, convention: str = "lag", *, unwrap: bool = True,
-              min_relative_amplitude: float = 0.02) -> np.ndarray:
+              min_relative_amplitude: float = 0.02, wrap_wild: bool = True) -> np.ndarray:
     """Phase of vectors ``X`` (lead convention, ``x = Re(X e^{i phi})``) in degrees.
 
     ``lead``: ``angle(X)``; ``lag``: the instrument convention ``x = A cos(phi - lag)``,
@@ -130,7 +153,8 @@ def phase_deg(X: np.ndarray, convention: str = "lag", *, unwrap: bool = True,
     (a resonance turns it by 180 deg, two by 360), the first point in [0, 360), as long
     as it stays within [-180, 540]: beyond, the 1X vector is circling (the free whirl
     beating against 1X after a fast passage), not turning with a resonance, and those
-    values are shown modulo 360.  Without ``unwrap`` every value is in [0, 360).  Vectors
+    values are shown modulo 360 (``wrap_wild=False``: never; the Bode plot's choice, where
+    a jump of 360 deg reads as a zig-zag).  Without ``unwrap`` every value is in [0, 360).  Vectors
     below ``min_relative_amplitude`` of the largest carry no phase (noise): NaN there.
     """
     if convention not in ("lag", "lead"):
@@ -147,8 +171,9 @@ def phase_deg(X: np.ndarray, convention: str = "lag", *, unwrap: bool = True,
     deg = np.degrees(np.unwrap(ang[ok]) if unwrap else ang[ok])
     if unwrap:
         deg = deg - 360.0 * math.floor(deg[0] / 360.0)
-        wild = (deg < -180.0) | (deg > 540.0)
-        deg[wild] = np.mod(deg[wild], 360.0)
+        if wrap_wild:
+            wild = (deg < -180.0) | (deg > 540.0)
+            deg[wild] = np.mod(deg[wild], 360.0)
     else:
         deg = np.mod(deg, 360.0)
     out[ok] = deg
@@ -201,10 +226,10 @@ def plot_bode(
     unwrapped through the run) or ``lead`` (``angle(X)``).  ``ax``: a pair of axes.
     """
     fig, (a_amp, a_ph), speed, curves = _vector_plot(ax, 2, speed, measured, models, figsize=(8, 5.5), sharex=True)
-    for label, ch, style, X in curves:
+    for (label, ch, style, X), ph in zip(curves, bode_phases(curves, phase), strict=True):
         colour = f"C{ch}"
         a_amp.plot(speed, np.abs(X), color=colour, label=label, **style)
-        a_ph.plot(speed, phase_deg(X, phase), color=colour, **style)
+        a_ph.plot(speed, ph, color=colour, **style)
     a_amp.set_ylabel(_label(f"{order}X amplitude", amp_unit))
     a_ph.set_ylabel(f"{order}X phase {phase} (deg)")
     a_ph.set_xlabel(_label("speed", speed_unit))
@@ -213,6 +238,27 @@ def plot_bode(
                     + ("x = A cos(φ - lag))" if phase == "lag" else "x = Re(X e^{iφ}))"))
     a_ph.yaxis.set_major_locator(_degree_locator())
     return fig
+
+
+def bode_phases(curves, convention: str = "lag") -> list[np.ndarray]:
+    """The phase (deg) of every curve of :func:`_curves`, unwrapped consistently: each curve
+    runs on continuously through the run (no jump back by 360 deg where a vector circles),
+    a measured curve starts in [0, 360), and a model's curve is moved by the multiple of
+    360 deg that lays it on the measured curve of its channel (the median difference within
+    +-180 deg): measured and model never differ by a wrap."""
+    out = [phase_deg(X, convention, wrap_wild=False) for _, _, _, X in curves]
+    reference: dict[int, np.ndarray] = {}
+    for (label, ch, _, _), ph in zip(curves, out, strict=True):
+        if label.endswith(": measured") and ch not in reference:
+            reference[ch] = ph
+    for (_, ch, _, _), ph in zip(curves, out, strict=True):
+        ref = reference.get(ch)
+        if ref is None or ph is ref:
+            continue
+        both = np.isfinite(ph) & np.isfinite(ref)
+        if both.any():
+            ph -= 360.0 * np.round(np.median(ph[both] - ref[both]) / 360.0)
+    return out
 
 
 def _degree_locator():
@@ -398,6 +444,7 @@ def plot_waterfall(
         keep = orders >= 0
         amp = amp[:, keep] * np.where(orders[keep] > 0, 2.0, 1.0)
         orders = orders[keep]
+    speeds, amp = by_speed(speeds, amp)
     fps = _freq_per_speed(speed_unit)
     freq_unit = FREQUENCY_UNITS[speed_unit][0]
     if amp.size:
@@ -658,11 +705,30 @@ def parameter_tracks(
     )
 
 
+def monitor_alarms(meas, effects: Sequence[str], ip: float, *, arl0: float = 1e7) -> list[dict]:
+    """The alarms of the on-line monitor's calibrated test over ``meas`` (dimensionless).
+
+    :class:`rotor_env.monitor.Monitor` (block evidence with HAC variance and an in-control
+    calibration, one CUSUM per effect, threshold from the target ARL0 ``arl0`` samples:
+    :mod:`rotor_env.monitor.detector`) run over the record: each alarm is
+    ``{"event", "effect", "t_onset", "t_alarm"}``.  These are the marks a parameter-track
+    figure shows; the identifier's own effect-last F tests assume a white residual and
+    flag effects long before they exist on real, coloured residuals.
+    """
+    from ..monitor.core import Monitor, MonitorConfig
+
+    data = np.ascontiguousarray(meas.data)
+    mon = Monitor(MonitorConfig(effects=tuple(effects), ip=float(ip), arl0=arl0))
+    events = [e for e in mon.update(data) if e.get("event") in ("appeared", "changed", "disappeared")]
+    return [{k: e[k] for k in ("event", "effect", "t_onset", "t_alarm")} for e in events]
+
+
 def plot_parameter_tracks(
     t: np.ndarray,
     tracks: Mapping[str, np.ndarray],
     *,
     significance: Mapping[str, np.ndarray] | None = None,
+    alarms: Sequence[Mapping] | None = None,
     truth: Mapping[str, float] | None = None,
     groups: Mapping[str, Sequence[str]] | None = None,
     final: Mapping[str, tuple[float, float]] | None = None,
@@ -675,11 +741,18 @@ def plot_parameter_tracks(
 
     ``tracks``: name -> value at each ``t``; ``significance``: name (a track, or an
     effect of ``groups``) -> bool at each ``t``: a track is drawn solid where its effect
-    is significant, thin where not; ``truth``: name -> the true value (dashed, for
-    simulated data); ``final``: name -> ``(estimate, half-width)`` of a batch fit (a band
-    at the right edge).  ``ax``: a pair of axes (the bottom one only with ``significance``).
+    is significant, thin where not; ``alarms`` (instead of ``significance``): the
+    monitor's calibrated alarms (:func:`monitor_alarms`, times in ``t``'s unit): the
+    bottom panel shows each effect from an alarm's onset to its next alarm or the end,
+    the top one a dotted line at each onset, every track drawn plain; ``truth``: name ->
+    the true value, a number or an array over ``t`` (a crack opening: a step) (dashed,
+    for simulated data); ``final``: name -> ``(estimate, half-width)`` of a batch fit (a
+    band at the right edge).  ``ax``: a pair of axes (the bottom one only with
+    ``significance`` or ``alarms``).
     """
     t = np.asarray(t, dtype=float)
+    if alarms is not None:
+        significance = _alarm_spans(t, alarms, groups)
     n_ax = 2 if significance else 1
     if ax is None:
         import matplotlib.pyplot as plt
@@ -695,30 +768,37 @@ def plot_parameter_tracks(
         colour = f"C{i % 10}"
         v = np.asarray(v, dtype=float)
         key = name if significance and name in significance else effect_of.get(name)
-        if significance and key in significance:
+        if significance and key in significance and alarms is None:
             sig = np.asarray(significance[key], dtype=bool)
             a_tr.plot(t, v, color=colour, lw=0.6, alpha=0.45)
             a_tr.plot(t, np.where(sig, v, np.nan), color=colour, lw=1.6, label=name)
         else:
             a_tr.plot(t, v, color=colour, lw=1.2, label=name)
         if truth and name in truth:
-            a_tr.axhline(truth[name], color=colour, ls="--", lw=0.9)
+            true = np.asarray(truth[name], dtype=float)
+            if true.ndim == 0:
+                a_tr.axhline(float(true), color=colour, ls="--", lw=0.9)
+            else:
+                a_tr.plot(t, true, color=colour, ls="--", lw=0.9)
         if final and name in final:
             est, half = final[name]
             a_tr.errorbar([t[-1]], [est], yerr=[[half], [half]], fmt="s", color=colour, ms=4, capsize=3)
     # the scale of the settled estimates: the first samples of a recursive fit swing wildly
     settled = [np.asarray(v, dtype=float)[len(t) // 5:] for v in tracks.values()]
-    settled += [np.array([x]) for x in (truth or {}).values()]
+    settled += [np.atleast_1d(np.asarray(x, dtype=float)) for x in (truth or {}).values()]
     settled += [np.array([e - h, e + h]) for e, h in (final or {}).values()]
     vals = np.concatenate([v[np.isfinite(v)] for v in settled]) if settled else np.empty(0)
     if vals.size:
         lo, hi = float(vals.min()), float(vals.max())
         pad = 0.1 * (hi - lo) if hi > lo else 0.1 * max(abs(hi), 1e-12)
         a_tr.set_ylim(lo - pad, hi + pad)
+    for a in alarms or ():
+        a_tr.axvline(a["t_onset"], color="0.3", ls=":", lw=0.9)
     a_tr.set_ylabel(_label("coefficient", value_unit))
-    a_tr.set_title("online identification: parameter tracks"
-                   + (" (bold: effect significant; dashed: truth)" if truth else " (bold: effect significant)"
-                      if significance else ""), fontsize=10)
+    what = ("dotted: an alarm's onset" if alarms is not None else "bold: effect significant") if significance or \
+        alarms is not None else ""
+    what = ", ".join(x for x in (what, "dashed: truth" if truth else "") if x)
+    a_tr.set_title("online identification: parameter tracks" + (f" ({what})" if what else ""), fontsize=10)
     a_tr.legend(fontsize=7, ncol=min(4, max(1, len(tracks))), loc="upper left")
     if n_ax == 2:
         a_sig = axes[1]
@@ -730,7 +810,8 @@ def plot_parameter_tracks(
             a_sig.broken_barh(spans, (i - 0.35, 0.7), color="C2")
         a_sig.set_yticks(range(len(names)), names, fontsize=7)
         a_sig.set_ylim(-0.6, len(names) - 0.4)
-        a_sig.set_title("significant (effect-last F test, alpha as given)", fontsize=8)
+        a_sig.set_title("changed or appeared: the monitor's calibrated CUSUM test (rotor_env/monitor/detector.py)"
+                        if alarms is not None else "significant (effect-last F test, alpha as given)", fontsize=8)
         a_sig.set_xlabel(_label("t", time_unit))
     else:
         a_tr.set_xlabel(_label("t", time_unit))

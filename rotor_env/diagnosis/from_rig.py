@@ -180,7 +180,10 @@ def diagnose_rig(
     progress: bool = False,
 ) -> RigDiagnosis:
     """Diagnose a rig recording (see the module docstring)."""
+    from ..progress import step
+
     ip = record.rig.ip
+    step("1X vectors: order tracking and the synchronous fit")
     vd = diagnose_vectors(record.vectors((1,)), ip=ip, alpha=alpha)
     if RUNOUT in vd.missing and record.rig.slow_roll_rpm is None:
         # runout seen in the 1X vectors: compensate it as field engineers do, from the
@@ -198,6 +201,7 @@ def diagnose_rig(
             record = replace(record, notes=(*record.notes, f"runout seen in the 1X vectors, but the run has no "
                                                           f"slow roll below {below:.0f} rpm to take it from"))
     w_ref = vd.after.w_ref
+    step("waveforms: the output-error fit of every candidate")
     if not math.isfinite(w_ref):  # pragma: no cover - fit_vectors returns finite values
         raise RuntimeError("no natural frequency identified")
     cands = [c for c in (candidates if candidates is not None else LIBRARY_CANDIDATES) if c not in model]

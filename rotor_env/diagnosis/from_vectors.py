@@ -489,8 +489,9 @@ def diagnose_vectors(
         missing.append(best[0])
         current = best[1]
         remaining = [c for c in remaining if c != best[0]]
-        # an effect rejected earlier may be accepted once another is in: keep only the last reasons
-        rejected = [r for r in rejected if r["effect"] in remaining]
+        # every remaining effect is tried again in the next round: only the last round's
+        # reasons stand (they were listed once per round before)
+        rejected = []
     if not current.criticals:
         notes.append(f"no critical speed within the run ({table.rpm.min():.0f}-{table.rpm.max():.0f} rpm): the "
                      f"natural frequency ({current.w_ref / SPEED_UNITS['rpm']:.0f} rpm) is extrapolated; see its "

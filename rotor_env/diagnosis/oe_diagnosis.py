@@ -171,8 +171,9 @@ class OutputErrorDiagnosis:
 
     def summary(self) -> str:
         s, u = self.unit_scale * self.probe_factor, self.unit
-        lines = [f"verdict: {self.verdict} (output error: residual {self.rms_ratio_after:.3g}x the probes' noise "
-                 f"floor {self.noise_floor * s:.3g} {u}; starting model {self.rms_ratio_before:.3g}x)",
+        lines = [f"verdict: {self.verdict} (output error: residual {self.after.rms * s:.4g} {u} = "
+                 f"{self.rms_ratio_after:.3g}x the probes' noise floor {self.noise_floor * s:.4g} {u}; starting "
+                 f"model {self.before.rms * s:.4g} {u} = {self.rms_ratio_before:.3g}x)",
                  f"model: {', '.join(self.model_before)}"
                  + (f"  + {', '.join(self.added)}" if self.added else "")]
         for e, d in self.parameters().items():

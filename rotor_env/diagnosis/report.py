@@ -8,6 +8,7 @@ import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -153,8 +154,10 @@ class DiagnosisFigures:
         for x, y, style, label in curves:
             top.plot(x, y, label=label, **style)
         top.set_ylabel(u.label(r"amplitude $|\theta|$", u.amp_unit))
-        top.legend(fontsize=7, loc="upper left")
-        top.set_title("measured vs model response (free run)")
+        # above the axes, between them and the title: never over a curve (nor the zoom)
+        top.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.01), ncol=2, frameon=False,
+                   borderaxespad=0.0)
+        top.set_title("measured vs model response (free run)", pad=8 + 11 * ((len(curves) + 1) // 2))
         lo, hi = (float(v) for v in u.speed(np.array(self._critical_window())))
         if zoom and hi > lo:
             inset = top.inset_axes([0.62, 0.45, 0.36, 0.5])
@@ -217,6 +220,7 @@ class DiagnosisFigures:
         m = self.data.meas
         u = self.plot_units()
         speeds, orders, amp = order_map(m.t, m.phi, u.speed(m.phi_dot), complex_rows(comp.residual, self.equation))
+        speeds, amp = fp.by_speed(speeds, amp)  # pcolormesh wants monotonic rows (else a UserWarning)
         if amp.size:
             mesh = ax.pcolormesh(orders, speeds, np.log10(amp + 1e-12), shading="nearest", cmap="viridis")
             fig.colorbar(mesh, ax=ax, label="log10 amplitude (dimensionless moment)")
@@ -234,14 +238,39 @@ class DiagnosisFigures:
                 continue
             for j, o in enumerate(declared):
                 ax.axvline(o, color=colour, label=label if j == 0 else None, **style)
-        if lines:
+        mirrored = self._mirrored_whirl()
+        for i, (name, m, speed_model, order) in enumerate(mirrored):
+            ax.plot(order, u.speed(speed_model), color=_LINE_COLOURS[(len(lines) + i) % len(_LINE_COLOURS)],
+                    ls="-.", lw=1.4, label=f"{name}: the free whirl ω mirrored to {m}x − ω/Ω")
+        if lines or mirrored:
             # below the axes (and their order label), so the map stays unhidden
-            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=min(3, len(lines)),
-                      title="expected order lines (solid: added, dashed: lookalike)", title_fontsize=7)
+            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16),
+                      ncol=min(3, len(lines) + len(mirrored)),
+                      title="expected order lines (solid: added, dashed: lookalike; dash-dot: a rotating "
+                      "asymmetry turns the free whirl ω into 2Ω − ω, between 1x and 2x)", title_fontsize=7)
         ax.set_xlabel("rotation order (+ forward, - backward)")
         ax.set_ylabel(u.label("speed", u.speed_unit))
         ax.set_title(f"order map of the {which}-model residual")
         return fig
+
+    #: effects whose moment mirrors a whirl ``z ~ e^{i w t}`` into ``e^{i (m Omega - w) t}``
+    #: (``conj(z) e^{i m phi}``): a rotating asymmetry (m = 2); its residual sits there, not at
+    #: its declared 1x/2x, when the record holds free whirl (the crack's opening excites it)
+    MIRRORING: ClassVar[dict[str, int]] = {"asymmetry": 2, "breathing_crack": 2}
+
+    def _mirrored_whirl(self) -> list[tuple[str, int, np.ndarray, np.ndarray]]:
+        """``(effect, m, speed, order)`` of each added mirroring effect: the order
+        ``m - w_f / Omega`` of the final model's forward free whirl ``w_f`` against speed."""
+        added = [(e, self.MIRRORING[e]) for e in self.missing if e in self.MIRRORING]
+        if not added:
+            return []
+        speed, branches = self.whirl_model()
+        forward = [np.asarray(w, float) for w in branches.values() if np.nanmedian(np.asarray(w, float)) > 0]
+        if not forward:
+            return []
+        w_f = min(forward, key=lambda w: float(np.nanmedian(w)))  # the lowest forward branch
+        keep = speed > 0.3 * float(np.nanmax(speed))  # Omega -> 0: the mirror runs off the map
+        return [(e, m, speed[keep], m - w_f[keep] / speed[keep]) for e, m in added]
 
     def _expected_lines(self, lookalikes: int = 2) -> list[tuple[str, tuple[float, ...], str]]:
         """``(effect, signed orders, "added" | "lookalike")`` for each added effect and up to
@@ -340,7 +369,8 @@ class DiagnosisFigures:
         ax.plot(t, r0, lw=0.3, color="C3", label=f"starting model (RMS {self.before.rms:.3g})")
         ax.plot(t, r1, lw=0.3, color="C0", label=f"final model (RMS {self.after.rms:.3g})")
         ax.axhspan(-2 * self.noise_floor, 2 * self.noise_floor, color="0.5", alpha=0.25,
-                   label=f"2x noise floor ({self.noise_floor:.3g})")
+                   label=f"±2x the noise floor: the white-noise RMS of the residual, {self.noise_floor:.3g} "
+                   "(dimensionless moment)")
         ax.set_xlabel(u.label("t", u.time_unit))
         ax.set_ylabel("equation residual (dimensionless)")
         ax.legend(fontsize=7, loc="upper left", markerscale=4)
@@ -470,21 +500,45 @@ class DiagnosisFigures:
                                              equation=self.equation)
         return cache[key]
 
+    def monitor_alarms(self) -> list[dict] | None:
+        """The on-line monitor's calibrated alarms over the record with the final model's
+        effects (:func:`.field_plots.monitor_alarms`; model time), None where the monitor
+        cannot watch this model (an effect with a scanned parameter)."""
+        cache = self._field_cache()
+        if "alarms" not in cache:
+            try:
+                cache["alarms"] = fp.monitor_alarms(self.data.meas, self.model, self.ip)
+            except (ValueError, KeyError, NotImplementedError):
+                cache["alarms"] = None
+        return cache["alarms"]
+
     def plot_parameter_tracks(self, ax=None, truth: dict[str, float] | None = None,
                               forgetting: float | None = None):
-        """Parameter and significance tracks of the online identification; the batch
-        estimates of the diagnosis (95 % HAC) at the right end; ``truth`` (coefficient
-        name -> value) dashed for simulated data."""
+        """Parameter tracks of the online identification, with the on-line monitor's
+        calibrated alarms (the bottom panel: an effect from the onset of its change on);
+        the batch estimates of the diagnosis (95 % HAC) at the right end; ``truth``
+        (coefficient name -> value, or an array over the record; default: :attr:`truth`)
+        dashed for simulated data."""
         u = self.plot_units()
         tr = self.parameter_tracks(forgetting)
         final = {c: (float(v), 1.96 * float(s)) for c, v, s in
                  zip(self.after.columns, self.after.coefficients, self.after.standard_errors, strict=True)
                  if c in tr.coefficients}
-        fig = fp.plot_parameter_tracks(u.time(tr.t), tr.coefficients, significance=tr.significant, truth=truth,
-                                       groups=tr.groups, final=final, time_unit=u.time_unit, ax=ax)
+        truth = truth if truth is not None else getattr(self, "truth", None)
+        alarms = self.monitor_alarms()
+        if alarms is not None:
+            alarms = [{**a, "t_onset": float(u.time(a["t_onset"])), "t_alarm": float(u.time(a["t_alarm"]))}
+                      for a in alarms]
+            fig = fp.plot_parameter_tracks(u.time(tr.t), tr.coefficients, alarms=alarms, truth=truth,
+                                           groups=tr.groups, final=final, time_unit=u.time_unit, ax=ax)
+            marks = "dotted: onset of an alarm of the monitor's calibrated test"
+        else:  # the identifier's own flags (white-residual F tests), said so
+            fig = fp.plot_parameter_tracks(u.time(tr.t), tr.coefficients, significance=tr.significant,
+                                           truth=truth, groups=tr.groups, final=final, time_unit=u.time_unit, ax=ax)
+            marks = "bold where the effect-last F test (white residual) is significant"
         _first_axes(fig, ax).set_title(
-            f"online identification (recursive QR, forgetting {tr.forgetting:.5g}): bold where the effect is "
-            "significant; squares: batch estimate ± 95 %", fontsize=8)
+            f"online identification (recursive QR, forgetting {tr.forgetting:.5g}): {marks}; "
+            + ("dashed: truth; " if truth else "") + "squares: batch estimate ± 95 %", fontsize=8)
         return fig
 
     #: the figures :meth:`figures` draws, by file name
@@ -575,10 +629,13 @@ class DiagnosisFigures:
             else:
                 parts.append("<p>No band of time stands above the floor.</p>")
         rows = "".join(
-            f"<tr><td>{_e(r.get('effect', ''))}</td><td>{_e(r.get('rule', ''))}</td></tr>" for r in self.rejected
-        ) or "<tr><td colspan=2>none</td></tr>"
+            f"<tr><td>{_e(r.get('effect', ''))}</td><td>{_e(r.get('rule', ''))}</td>"
+            + (f"<td>{_e(r['round'])}</td>" if r.get("round") else "") + "</tr>"
+            for r in self.rejected
+        ) or "<tr><td colspan=3>none</td></tr>"
         parts.append("<h3>Candidates turned down</h3>"
-                     f"<table class='rejected'><tr><th>effect</th><th>rule that rejected it</th></tr>{rows}</table>")
+                     "<table class='rejected'><tr><th>effect</th><th>rule that rejected it</th>"
+                     f"<th>round (the last that tried it)</th></tr>{rows}</table>")
         if self.notes:
             items = "".join(f"<li>{_e(n)}</li>" for n in self.notes)
             parts.append(f"<h3>Notes</h3><ul class='notes'>{items}</ul>")
@@ -671,10 +728,14 @@ class DiagnosisFigures:
         def img(name):
             return f'<img alt="{name}" src="data:image/png;base64,{imgs[name]}">'
 
+        from .result import _fit_cell
+
+        decided = self.decisions()
         cand_rows = "".join(
             f"<tr class='{'missing' if c.effect in self.missing else ''}'><td>{_e(c.effect)}</td><td>{c.F:.4g}</td>"
-            f"<td>{c.log10_p:.4g}</td><td>{c.rms_after:.4g}</td><td>{c.fit_percent_after:.1f}</td>"
-            f"<td>{c.correlation:.2f}</td><td>{c.order_overlap:.2f}</td><td>{html.escape(c.story)}</td></tr>"
+            f"<td>{c.log10_p:.4g}</td><td>{c.rms_after:.4g}</td><td>{_fit_cell(c)}</td>"
+            f"<td>{c.correlation:.2f}</td><td>{c.order_overlap:.2f}</td><td>{_e(decided.get(c.effect, 'not decided'))}</td>"
+            f"<td>{html.escape(c.story)}</td></tr>"
             for c in self.candidates
         )
         win_rows = "".join(
@@ -724,7 +785,7 @@ p.verdict-word{{font-size:2em;font-weight:bold;margin:.2em 0}}
 <p>Windows where the residual stands above the noise floor ({self.noise_floor:.3g}):</p>
 <table><tr><th>t start</th><th>t end</th><th>peak RMS / floor</th></tr>{win_rows}</table>
 <h2>Which effect is missing</h2>{img('candidates')}
-<table><tr><th>effect</th><th>F</th><th>log10 p</th><th>RMS after</th><th>fit % after</th><th>corr.</th><th>order overlap</th><th>physical story</th></tr>{cand_rows}</table>
+<table><tr><th>effect</th><th>F</th><th>log10 p</th><th>RMS after</th><th>fit % after</th><th>corr.</th><th>order overlap</th><th>decision (round)</th><th>physical story</th></tr>{cand_rows}</table>
 <h2>Before and after</h2>{img('before_after')}
 <p>The final model's residual (shaded where it still stands above 2&times; the noise floor):</p>
 {img('residual_after')}

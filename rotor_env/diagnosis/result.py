@@ -90,6 +90,9 @@ class Diagnosis(DiagnosisFigures):
     notes: list[str] = field(default_factory=list)
     #: per added effect: the evidence that told it from its lookalikes (see verdict.lookalike_evidence)
     lookalikes: list[dict] = field(default_factory=list)
+    #: the true coefficients where the data were simulated (coefficient -> a number, or an
+    #: array over ``data.meas.t``): drawn dashed in the parameter tracks (docs/PLOTS.md)
+    truth: dict | None = field(default=None, repr=False)
 
     @property
     def candidates(self) -> list[Candidate]:
@@ -150,6 +153,19 @@ class Diagnosis(DiagnosisFigures):
     def to_json(self, **kwargs) -> str:
         return json.dumps(jsonable(self.to_dict()), **kwargs)
 
+    def decisions(self) -> dict[str, str]:
+        """Each candidate's outcome, from the same source as the turned-down list: ``"added
+        in round k"`` or ``"turned down in round k: <rule, up to its colon>"``."""
+        out = {}
+        for k, ranked in enumerate(self.rounds, start=1):
+            for c in ranked:
+                if k <= len(self.missing) and c.effect == self.missing[k - 1]:
+                    out[c.effect] = f"added in round {k}"
+        for r in self.rejected:
+            rule = r["rule"].split(":")[0]
+            out[r["effect"]] = f"turned down in round {r['round']}: {rule}" if r.get("round") else f"turned down: {rule}"
+        return out
+
     def summary(self) -> str:
         b, a = self.before, self.after
         lines = [
@@ -160,13 +176,14 @@ class Diagnosis(DiagnosisFigures):
             f"  residual above the noise floor ({self.noise_floor:.3g}) in {len(self.windows)} window(s)"
             + (": " + ", ".join(f"{w['t_start']:.0f}–{w['t_end']:.0f}" for w in self.windows[:6]) if self.windows else ""),
             "",
-            "candidates (HAC Wald test of each added to the starting model):",
-            f"  {'effect':<22}{'F':>12}{'log10 p':>11}{'RMS after':>11}{'fit % after':>12}  verdict",
+            "candidates, round 1 (HAC Wald test of each added to the starting model; last column: what the "
+            "diagnosis decided, and in which round):",
+            f"  {'effect':<22}{'F':>12}{'log10 p':>11}{'RMS after':>11}{'fit % after':>12}  decision",
         ]
+        decided = self.decisions()
         for c in self.candidates:
-            verdict = "MISSING" if c.effect in self.missing else (
-                "significant, not relevant" if c.significant else "not significant")
-            lines.append(f"  {c.effect:<22}{c.F:12.4g}{c.log10_p:11.4g}{c.rms_after:11.4g}{c.fit_percent_after:12.1f}  {verdict}")
+            lines.append(f"  {c.effect:<22}{c.F:12.4g}{c.log10_p:11.4g}{c.rms_after:11.4g}"
+                         f"{_fit_cell(c):>12}  {decided.get(c.effect, 'not decided')}")
         lines.append("")
         if self.missing:
             lines.append("missing effects, in the order added:")
@@ -184,7 +201,9 @@ class Diagnosis(DiagnosisFigures):
         for ev in self.lookalikes:
             if not ev["lookalikes"]:
                 continue
-            lines.append(f"  {ev['effect']} told apart from its lookalikes:")
+            added_in = self.missing.index(ev["effect"]) + 1 if ev["effect"] in self.missing else None
+            lines.append(f"  {ev['effect']} told apart from its lookalikes"
+                         + (f" (round {added_in}, when it was added):" if added_in else ":"))
             if ev["residual_orders"]:
                 lines.append("    the residual held " + ", ".join(
                     f"{o['order']}x {o['direction']} {100 * o['share']:.0f} %" for o in ev["residual_orders"]))
@@ -201,8 +220,9 @@ class Diagnosis(DiagnosisFigures):
             for lk in ev["lookalikes"]:
                 lines.append(f"    - {lk['effect']}: {lk['status']}")
         if self.rejected:
-            lines.append("candidates turned down:")
-            lines += [f"  - {r['effect']}: {r['rule']}" for r in self.rejected]
+            lines.append("candidates turned down (each by the last round that tried it):")
+            lines += [f"  - {r['effect']}" + (f" (round {r['round']})" if r.get("round") else "") + f": {r['rule']}"
+                      for r in self.rejected]
         lines.append("")
         lines.append(f"VERDICT: {self.verdict} — " + VERDICT_TEXT[self.verdict].format(
             ratio=self.rms_ratio_after, floor=self.noise_floor))
@@ -232,3 +252,9 @@ class Diagnosis(DiagnosisFigures):
                      + (" values corrected for the sensor noise in the regressors by SIMEX)" if a.eiv_bias is not None
                         else ")"))
         return "\n".join(lines)
+def _fit_cell(c) -> str:
+    """A candidate's free-run fit %; a free run that diverged has none (not "-100.0")."""
+    comp = getattr(c, "comparison", None)
+    if getattr(comp, "diverged", False) or not math.isfinite(c.fit_percent_after) or c.fit_percent_after <= -100.0:
+        return "diverged"
+    return f"{c.fit_percent_after:.1f}"

@@ -94,6 +94,9 @@ def diagnose(
     if ip is not None and not (math.isfinite(ip) and 0 <= ip < 1):
         raise ValueError(f"ip must be a number in [0, 1), got {float(ip)!r}")
     model = as_model(model)
+    from ..progress import step
+
+    step("checking the data: excitation, time scale, ip")
     if candidates is None:
         candidates = [c for c in LIBRARY_CANDIDATES if c not in model]
     else:
@@ -129,8 +132,10 @@ def diagnose(
         if not math.isfinite(ip_hat):
             raise NotIdentifiable("the gyroscopic moment is not excited (no speed or no rates)")
         ip_est = float(min(max(ip_hat, 0.0), 0.95))
+        ip_note = None  # the note of an estimate the widest model could not trust (revised below)
         if ip is None:
             ip_used = ip_est
+            ip_note = None if est.trusted else len(notes)
             notes.append(f"ip estimated from the data: {ip_hat:.4f} ± {1.96 * ip_se:.2g} (95 %)"
                          + ("" if est.trusted else
                             f"; uncertain: the widest library model leaves {est.rms_ratio:.1f}x the noise "
@@ -152,11 +157,9 @@ def diagnose(
         data.ip_uncertainty = 1.96 * ip_se if ip is None else 0.0
     except NotIdentifiable as exc:
         return NotIdentifiableResult(source=measurements.source, reason=str(exc), ip=ip, notes=notes)
-    pbar = None
-    if progress:
-        from tqdm.auto import tqdm
+    from ..progress import bar
 
-        pbar = tqdm(total=max_rounds, desc="diagnosing", unit="round", leave=False)
+    step("fitting the starting model")
     current = compare(data, model.effects, known_values(model.effects))
     before = current
     floor = estimate_noise_floor(data, before)
@@ -168,10 +171,13 @@ def diagnose(
     while remaining and len(rounds) < max_rounds:
         if floor > 0 and current.rms < floor and not data.noisy:
             break  # noise-free data below the numerical floor: what is left is round-off
+        pbar = bar(f"round {len(rounds) + 1}: ranking the candidates", len(remaining), "candidates",
+                   enabled=progress)
         ranked = rank_candidates(data, current, remaining, known_values(current.model), alpha, min_fit_gain, min_energy_drop)
-        rounds.append(ranked)
         if pbar is not None:
-            pbar.update(1)
+            pbar.close()
+        rounds.append(ranked)
+        step(f"round {len(rounds)}: checking the best candidates")
         chosen = _choose(data, current, ranked, floor, alpha)
         if chosen is None:
             break
@@ -184,8 +190,7 @@ def diagnose(
             current = appears_or_changes(data, current, chosen.effect, alpha, min_energy_drop)
         steps.append(current)
         remaining.remove(chosen.effect)
-    if pbar is not None:
-        pbar.close()
+    step("onsets, robust statistics and the verdict")
     onset = {
         e: current.onsets.get(e)
         if e in current.onsets
@@ -205,11 +210,17 @@ def diagnose(
                                  speed=data.meas.phi_dot)
     ratio = current.rms / floor if floor > 0 else math.inf
     verdict = verdict_of(bool(missing), ratio)
-    rejected: dict[str, str] = {}
-    for r in rounds:
+    if ip_note is not None and verdict in ("explained", "explained_after_adding"):
+        # the widest model's misfit was its own (every effect at once), not a fault outside
+        # the library: the final model, fitted with this ip, explains the record
+        notes[ip_note] = (f"ip estimated from the data: {ip_hat:.4f} ± {1.96 * ip_se:.2g} (95 %); the widest library "
+                          f"model (every effect at once) left {est.rms_ratio:.1f}x the noise floor, the final model "
+                          f"fitted with this ip explains the record ({ratio:.2g}x the floor)")
+    rejected: dict[str, tuple[int, str]] = {}
+    for k, r in enumerate(rounds, start=1):
         for c in r:
             if c.rejected_by is not None and c.effect not in missing:
-                rejected[c.effect] = c.rejected_by
+                rejected[c.effect] = (k, c.rejected_by)  # the last round that decided it
     return Diagnosis(
         source=measurements.source, ip=ip_used, alpha=alpha, equation=equation, t_start=data.t_start,
         start_model=model.effects, model=current.model, missing=missing, onset=onset, rounds=rounds,
@@ -217,7 +228,7 @@ def diagnose(
         verdict=verdict, rms_ratio_after=ratio, rms_ratio_before=before.rms / floor if floor > 0 else math.inf,
         unexplained=describe_unexplained(data, current, floor) if verdict in ("partly_explained", "unexplained")
         else None,
-        rejected=[{"effect": e, "rule": rule} for e, rule in rejected.items()],
+        rejected=[{"effect": e, "rule": rule, "round": k} for e, (k, rule) in rejected.items()],
         ip_estimate=ip_hat, ip_standard_error=ip_se, time_scale=time_scale, notes=notes,
         lookalikes=lookalikes,
     )

@@ -5,9 +5,37 @@ file, a followed file or stdin), the sequential test's design in :mod:`.detector
 command ``rotor-id monitor`` in :mod:`.cli`.
 """
 
-from .core import Monitor, MonitorConfig
-from .detector import CusumDesign, cusum_arl0, cusum_threshold, simulate_arl
-from .stream import StreamReader, iter_chunks
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+# Imported on first use (PEP 562): the command line builds its parser from ``.cli`` without
+# loading the monitor's compiled core.
+_LAZY: dict[str, str] = {
+    "Monitor": ".core", "MonitorConfig": ".core",
+    "CusumDesign": ".detector", "cusum_arl0": ".detector", "cusum_threshold": ".detector",
+    "simulate_arl": ".detector",
+    "StreamReader": ".stream", "iter_chunks": ".stream",
+}
+
+if TYPE_CHECKING:
+    from .core import Monitor, MonitorConfig
+    from .detector import CusumDesign, cusum_arl0, cusum_threshold, simulate_arl
+    from .stream import StreamReader, iter_chunks
 
 __all__ = ["CusumDesign", "Monitor", "MonitorConfig", "StreamReader", "cusum_arl0", "cusum_threshold",
            "iter_chunks", "simulate_arl"]
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

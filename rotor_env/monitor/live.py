@@ -10,7 +10,11 @@ from typing import Any
 
 
 class LiveView:
-    """A rich ``Live`` table refreshed at every status line; alarms are kept below it."""
+    """A rich ``Live`` table refreshed at every status line; alarms are kept below it.
+
+    Piped (standard output not a terminal) there is nothing to refresh: each alarm is
+    printed as a line when it comes and the table once at the end, each on its own line.
+    """
 
     def __init__(self, source: str) -> None:
         from rich.console import Console
@@ -29,12 +33,16 @@ class LiveView:
 
         self.monitor = monitor
         self.clock = clock
+        if not self.console.is_terminal:
+            return  # piped: lines, no live refresh (show / stop print them)
         self.live = Live(self._render(), console=self.console, refresh_per_second=4, transient=False)
         self.live.start()
 
     def show(self, event: dict) -> None:
         if event["event"] in ("appeared", "changed", "disappeared"):
             self.alarms.append(event)
+            if self.live is None and self.monitor is not None:  # piped: the alarm as a line now
+                self.console.print(_alarm_line(event))
         elif event["event"] == "status":
             self.last_status = event
         elif event["event"] == "error":
@@ -64,8 +72,7 @@ class LiveView:
         parts: list[Any] = [table]
         if self.alarms:
             a = self.alarms[-1]
-            parts.append(f"[bold red]latest alarm[/bold red]: {a['effect']} {a['event']} at {_when(a)}: "
-                         f"{a['value_before']} -> {a['value_after']}; {len(self.alarms)} alarm(s) so far")
+            parts.append(f"[bold red]latest alarm[/bold red]: {_alarm_line(a)}; {len(self.alarms)} alarm(s) so far")
         else:
             parts.append("no alarm")
         return Group(*parts)
@@ -74,12 +81,24 @@ class LiveView:
         if self.live is not None:
             self.live.stop()
             self.live = None
+        elif self.monitor is not None:  # piped: the final table once
+            self.console.print(self._render())
 
     def print_summary(self, summary: dict) -> None:
         end = f"t = {summary['t_s']:.3f} s ({summary['rpm']:.0f} rpm)" if "t_s" in summary else f"t = {summary['t']:.2f}"
         self.console.print(f"{summary['samples']} samples to {end}: {summary['alarms']} alarm(s)")
         for e in summary["events"]:
             self.console.print(f"  {e['effect']} {e['event']} at {_when(e)}")
+
+
+def _values(values: dict) -> str:
+    """``{"D": 0.03, "k": 1.0}`` -> ``"D = 0.03, k = 1"`` (not a Python dict repr)."""
+    return ", ".join(f"{k} = {v:.4g}" if isinstance(v, (int, float)) else f"{k} = {v}" for k, v in values.items())
+
+
+def _alarm_line(a: dict) -> str:
+    """One alarm in words: effect, event, when, the value before and after."""
+    return f"{a['effect']} {a['event']} at {_when(a)}: {_values(a['value_before'])} -> {_values(a['value_after'])}"
 
 
 def _when(e: dict) -> str:
