@@ -32,6 +32,8 @@ from collections import Counter
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from .ray_cluster import init_ray
+
 __all__ = [
     "Recording",
     "add_batch_parser",
@@ -316,23 +318,6 @@ def _record(row: dict) -> dict:
             "status": "ok" if row["ok"] else "error",
             "error": row["error"] or None, "seconds": row["seconds"],
             "diagnosis": json.loads(row["result_json"]) if row["ok"] else None}
-
-
-def init_ray(workers: int, address: str | None):
-    """Ray's local mode with ``workers`` CPUs, or the cluster at ``address``.  Returns
-    True when this call started Ray (and so should shut it down)."""
-    import logging
-
-    import ray
-
-    if ray.is_initialized():
-        return False
-    kwargs = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.ERROR}
-    if address:
-        ray.init(address=address, **kwargs)
-    else:
-        ray.init(num_cpus=workers, **kwargs)
-    return True
 
 
 def run_batch(inputs: list[str], out: str | Path, *, workers: int = 1, address: str | None = None,

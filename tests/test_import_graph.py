@@ -24,7 +24,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # generic numerics: knows nothing about rotors
     ("identifier",),
     # the declarations and the file writer everything shares
-    ("rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results"),
+    ("rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results", "rotor_env.progress"),
     # data in: the ten columns, rig descriptions, readers of files and streams
     ("rotor_env.measurements", "rotor_env.io"),
     # the model: regression, simulation, the on-line identification engine
@@ -32,7 +32,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
      "rotor_env.online", "rotor_env.rig_simulation"),
     # what is built on the model: diagnosis, monitoring, environments and their wrapper
     ("rotor_env.diagnosis", "rotor_env.monitor", "rotor_env.envs", "rotor_env.wrappers",
-     "rotor_env.paper", "rotor_env.effects_doc", "rotor_env.batch", "rotor_env.fleet"),
+     "rotor_env.paper", "rotor_env.effects_doc", "rotor_env.batch", "rotor_env.fleet", "rotor_env.balance",
+     "rotor_env.ray_cluster"),
     # the command line and the tour
     ("rotor_env.cli", "rotor_env.walkthrough"),
     # the package facade (rotor_env/__init__.py)
@@ -45,6 +46,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 #: where no reinforcement-learning stack is installed): they import neither the environments
 #: nor the wrapper.
 GYMNASIUM_FREE = ("identifier", "rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results",
+                  "rotor_env.progress", "rotor_env.balance",
                   "rotor_env.measurements", "rotor_env.io", "rotor_env.regression", "rotor_env.simulator",
                   "rotor_env.online", "rotor_env.diagnosis", "rotor_env.monitor", "rotor_env.batch",
                   "rotor_env.fleet")

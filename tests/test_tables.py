@@ -8,7 +8,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from rotor_env.diagnosis.result import Diagnosis, _fit_cell
+from rotor_env.diagnosis.report import fit_cell
+from rotor_env.diagnosis.result import Diagnosis
 
 
 def _cand(effect, fit=50.0, diverged=False):
@@ -28,9 +29,9 @@ def test_decisions_name_the_round_from_the_turned_down_list():
 
 
 def test_a_diverged_free_run_has_no_fit_percent():
-    assert _fit_cell(_cand("x", fit=-100.0, diverged=True)) == "diverged"
-    assert _fit_cell(_cand("x", fit=-100.0)) == "diverged"
-    assert _fit_cell(_cand("x", fit=63.84)) == "63.8"
+    assert fit_cell(_cand("x", fit=-100.0, diverged=True)) == "diverged"
+    assert fit_cell(_cand("x", fit=-100.0)) == "diverged"
+    assert fit_cell(_cand("x", fit=63.84)) == "63.8"
 
 
 @pytest.fixture(scope="module")

@@ -728,12 +728,11 @@ class DiagnosisFigures:
         def img(name):
             return f'<img alt="{name}" src="data:image/png;base64,{imgs[name]}">'
 
-        from .result import _fit_cell
 
         decided = self.decisions()
         cand_rows = "".join(
             f"<tr class='{'missing' if c.effect in self.missing else ''}'><td>{_e(c.effect)}</td><td>{c.F:.4g}</td>"
-            f"<td>{c.log10_p:.4g}</td><td>{c.rms_after:.4g}</td><td>{_fit_cell(c)}</td>"
+            f"<td>{c.log10_p:.4g}</td><td>{c.rms_after:.4g}</td><td>{fit_cell(c)}</td>"
             f"<td>{c.correlation:.2f}</td><td>{c.order_overlap:.2f}</td><td>{_e(decided.get(c.effect, 'not decided'))}</td>"
             f"<td>{html.escape(c.story)}</td></tr>"
             for c in self.candidates
@@ -880,3 +879,11 @@ def _order(o) -> str:
         return f"{float(o):g}x"
     except (TypeError, ValueError):
         return f"{o}x"
+
+
+def fit_cell(c) -> str:
+    """A candidate's free-run fit %; a free run that diverged has none (not "-100.0")."""
+    comp = getattr(c, "comparison", None)
+    if getattr(comp, "diverged", False) or not math.isfinite(c.fit_percent_after) or c.fit_percent_after <= -100.0:
+        return "diverged"
+    return f"{c.fit_percent_after:.1f}"

@@ -13,7 +13,7 @@ from ..results import jsonable
 from .candidates import Candidate
 from .compare import Comparison, WindowData, compare, known_values
 from .model import Model
-from .report import DiagnosisFigures
+from .report import DiagnosisFigures, fit_cell
 from .verdict import VERDICT_TEXT
 
 
@@ -183,7 +183,7 @@ class Diagnosis(DiagnosisFigures):
         decided = self.decisions()
         for c in self.candidates:
             lines.append(f"  {c.effect:<22}{c.F:12.4g}{c.log10_p:11.4g}{c.rms_after:11.4g}"
-                         f"{_fit_cell(c):>12}  {decided.get(c.effect, 'not decided')}")
+                         f"{fit_cell(c):>12}  {decided.get(c.effect, 'not decided')}")
         lines.append("")
         if self.missing:
             lines.append("missing effects, in the order added:")
@@ -252,9 +252,3 @@ class Diagnosis(DiagnosisFigures):
                      + (" values corrected for the sensor noise in the regressors by SIMEX)" if a.eiv_bias is not None
                         else ")"))
         return "\n".join(lines)
-def _fit_cell(c) -> str:
-    """A candidate's free-run fit %; a free run that diverged has none (not "-100.0")."""
-    comp = getattr(c, "comparison", None)
-    if getattr(comp, "diverged", False) or not math.isfinite(c.fit_percent_after) or c.fit_percent_after <= -100.0:
-        return "diverged"
-    return f"{c.fit_percent_after:.1f}"

@@ -93,7 +93,7 @@ def monitor_streams(sources: list[str], config, *, rig=None, natural_rpm: float 
     """
     import ray
 
-    from ..fleet import init_ray
+    from ..ray_cluster import init_ray
 
     names = [str(Path(s)) for s in sources]
     if len(set(names)) != len(names):

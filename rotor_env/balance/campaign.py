@@ -1,0 +1,132 @@
+"""The balancing campaign: read, fit, correct, check (the package's entry :func:`balance`)."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .influence import InfluenceFit, fit_influence, visibility
+from .misfit import influence_misfit, unbalance_misfit
+from .result import BalanceResult
+from .runs import (
+    BalanceData,
+    BalanceError,
+    Campaign,
+    load_campaign,
+    read_balance_table,
+    stack_tables,
+)
+
+__all__ = ["BalanceData", "BalanceError", "BalanceResult", "Campaign", "InfluenceFit", "balance", "balance_data",
+           "load_campaign", "model_based_unbalance", "read_balance_table", "stack_tables"]
+
+#: a plane whose influence is not significant at this level (Wald test) is not seen by the calibration
+VISIBILITY_P = 0.05
+#: below this RMS ratio of a plane's influence to its standard error the intervals are noted as optimistic
+LOW_SNR = 10.0
+
+
+def balance(table: str | os.PathLike, runs: str | os.PathLike | Campaign, *, amp_unit: str = "um",
+            phase: str = "lag", probe_angles: dict[str, float] | None = None,
+            model_based: bool = True) -> BalanceResult:
+    """Balance from a table file and a runs file (or a :class:`Campaign`)."""
+    campaign = runs if isinstance(runs, Campaign) else load_campaign(runs)
+    data = read_balance_table(table, campaign, amp_unit=amp_unit, phase=phase)
+    res = balance_data(data, campaign, phase=phase)
+    if model_based and campaign.disk_mass_kg:
+        try:
+            res.model_based = model_based_unbalance(table, campaign, amp_unit=amp_unit, phase=phase,
+                                                    probe_angles=probe_angles)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            res.notes.append(f"model-based unbalance not computed: {exc}")
+    return res
+
+
+def balance_data(data: BalanceData, campaign: Campaign, *, phase: str = "lag") -> BalanceResult:
+    """:func:`balance` on a table already grouped (simulations, tests)."""
+    fit = fit_influence(data, campaign, phase=phase)
+    notes = []
+    vis = visibility(fit) if fit.variance_source != "none" else []
+    unseen = [v for v in vis if v["p_value"] > VISIBILITY_P]
+    if unseen:
+        v = unseen[0]
+        raise BalanceError(
+            f"{campaign.source}: plane {v['plane']!r}: the calibration cannot see it: its trial weights changed the "
+            f"vibration by no more than the repeats' scatter (Wald p = {v['p_value']:.2g}, largest change "
+            f"{v['snr']:.2g} standard errors) in {data.source}; use a larger trial weight (a change of at least "
+            "30 % or 30 deg)")
+    weak = [v for v in vis if v["rms_snr"] < LOW_SNR]
+    if weak:
+        notes.append("trial weights of plane(s) " + ", ".join(f"{v['plane']} ({v['rms_snr']:.2g})" for v in weak)
+                     + f" moved the vibration by fewer than {LOW_SNR:g} standard errors (RMS over speeds and probes): "
+                     "the first-order intervals under-cover there (docs/BALANCING.md §4); use larger trial weights "
+                     "or more repeats")
+    if fit.variance_source == "none":
+        notes.append("no repeats and no run beyond the planes + 1: the noise cannot be estimated, no intervals")
+    elif fit.variance_source == "residuals":
+        notes.append("no repeats: the noise level is estimated from the influence residuals (one level for all)")
+    if fit.condition_number > 30:
+        notes.append(f"condition number {fit.condition_number:.3g}: the planes act alike at these probes and speeds; "
+                     "the correction splits between them poorly (add speeds or probes where they differ)")
+    unb = {}
+    for k, run in enumerate(data.runs):
+        unb[run] = fit.unbalance(fit.run_combination(k))
+    c0 = fit.reference_combination()
+    U0, cov0 = fit.unbalance(c0)
+    residual = fit.residual_vibration(c0, U0)
+    im = influence_misfit(fit) if fit.variance_source != "none" else {"testable": False, "reason": "no noise level"}
+    um = unbalance_misfit(fit) if fit.variance_source != "none" else {"testable": False, "reason": "no noise level"}
+    if im.get("flagged") and um.get("flagged"):
+        # the one-unbalance check rests on the influence coefficients: while they misfit, what
+        # removes its misfit says nothing
+        um["explained_by"] = None
+        um["explanations"] = [{"explanation": e["explanation"], "testable": False,
+                               "reason": "the influence coefficients it rests on misfit (above)"}
+                              for e in um.get("explanations", [])]
+    return BalanceResult(fit, unb, (U0, cov0), residual, im, um, vis, None, notes)
+
+
+def model_based_unbalance(table: str | os.PathLike, campaign: Campaign, *, run: str | None = None,
+                          amp_unit: str = "um", phase: str = "lag",
+                          probe_angles: dict[str, float] | None = None) -> dict:
+    """The unbalance from one run-up of ``run`` (default the reference), no trial weight.
+
+    The 1X transient fit of :func:`rotor_env.diagnosis.from_vectors.diagnose_vectors`
+    (damping, natural frequency, unbalance) on the run's rows; its eccentricity times the
+    disk mass (``disk_mass_kg`` of the runs file) is the unbalance in g·mm.  One plane only
+    (the translation model); the angle is counted from the probes' reference direction
+    (``probe_angles``, the rig's), which is the keyphasor's when the keyphasor sits there;
+    without the probe angles, as the first probe sees it.
+    """
+    from ..diagnosis.from_vectors import diagnose_vectors
+    from ..measurements.vectors import VectorTable, load_vector_table
+
+    if len(campaign.planes) != 1:
+        raise BalanceError("the model-based unbalance is one plane's (the translation model): this campaign has "
+                           f"{len(campaign.planes)} planes")
+    plane = campaign.planes[0].name
+    if plane not in campaign.disk_mass_kg:
+        raise BalanceError(f"{campaign.source}: disk_mass_kg.{plane} is missing")
+    run = run or campaign.reference
+    full = load_vector_table(table, amp_unit=amp_unit, phase=phase, run_column="run", angles=probe_angles)
+    rows = np.array([r == run for r in full.runs])
+    if rows.sum() < 8:
+        raise BalanceError(f"{full.source}: run {run!r} has {int(rows.sum())} rows; the model-based unbalance needs a "
+                           "run-up or coast-down (at least 8 speeds)")
+    order = np.argsort(full.speed[rows], kind="stable")
+    t = None if full.t is None else full.t[rows][order]
+    if t is not None and not np.all(np.diff(t) > 0):
+        t = None
+    sub = VectorTable(speed=full.speed[rows][order], t=t, probes=full.probes,
+                      vectors={n: v[rows][order] for n, v in full.vectors.items()}, amp_unit=full.amp_unit,
+                      angles=full.angles, source=f"{full.source} (run {run})")
+    diag = diagnose_vectors(sub, candidates=(), phase=phase)
+    u = diag.unbalance(campaign.disk_mass_kg[plane])
+    if u is None or u["g_mm"] is None:
+        raise BalanceError("the 1X fit found no unbalance in the table's unit")
+    ang = u["angle_deg_lag"] if phase == "lag" else float(np.mod(-u["angle_deg_lag"], 360.0))
+    return {"run": run, "plane": plane, "g_mm": u["g_mm"], "angle_deg": ang,
+            "eccentricity": u["eccentricity"], "disk_mass_kg": campaign.disk_mass_kg[plane],
+            "natural_frequency_rpm": float(diag.after.w_ref * 60 / (2 * np.pi)),
+            "frame": "probe reference direction" if probe_angles else "as the first probe sees it (no probe angles)"}
