@@ -372,9 +372,13 @@ def diagnose_output_error(
         raise ValueError("the output-error diagnosis needs the probes' noise level (grid.noise_std)")
     floor = float(grid.noise_std)
 
+    from ..progress import advance, step
+
     def say(msg: str) -> None:
         if progress:
             print(f"[{time.perf_counter() - t_start:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+    step("waveforms: output-error fit of the starting model")
 
     start = equation_error_start(grid, model)
     base = fit_output_error(grid, model, start)
@@ -387,10 +391,11 @@ def diagnose_output_error(
             break
         excess = max(current.rss - floor * floor * current.n_rows, 1e-300)
         fits = {}
-        for c in cands:
-            if c in cur_model:
-                continue
+        todo = [c for c in cands if c not in cur_model]
+        step(f"waveforms, round {rnd}: output-error screening of each candidate", total=len(todo), unit="candidates")
+        for c in todo:
             f = _screen(grid, cur_model, c, current)
+            advance()
             say(f"round {rnd}: {c} screened" + (f" (residual {f.rms / floor:.3g}x the floor)" if f else " (diverged)"))
             if f is not None:
                 fits[c] = f
@@ -402,7 +407,10 @@ def diagnose_output_error(
         keep = ranked[:SCREEN_KEEP]
         if any(c in CRACKS for c in keep) and "rub" in fits and "rub" not in keep:
             keep.append("rub")
+        step(f"waveforms, round {rnd}: the best candidates fitted to convergence", total=len(keep),
+             unit="candidates")
         for c in keep:
+            advance()
             fits[c] = _converge(grid, cur_model, c, fits[c])
             say(f"round {rnd}: {c} fitted (residual {fits[c].rms / floor:.3g}x the floor)")
         n = max(len(fits), 1)
