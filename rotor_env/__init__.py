@@ -8,8 +8,8 @@
 
 from .diagnosis import Diagnosis, Model, diagnose, fit
 from .effects import EFFECTS, PACKAGE_EFFECTS, Effect, Parameter, get_effect, register_effect
-from .io import MeasurementError, load_measurements
 from .measurements import COLUMNS, Measurements
+from .measurements.files import MeasurementError, load_measurements
 from .params import Crack, RotorParams
 from .regression import Regression, RegressionSpec, build_regression
 from .simulator import RunUp, SimulationError, Simulator, free_run, simulate

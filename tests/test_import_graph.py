@@ -26,7 +26,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # the declarations and the file writer everything shares
     ("rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results"),
     # data in: the ten columns, rig descriptions, readers of files and streams
-    ("rotor_env.measurements", "rotor_env.io"),
+    ("rotor_env.measurements",),
     # the model: regression, simulation, the on-line identification engine
     ("rotor_env.regression", "rotor_env.simulator", "rotor_env.reference", "rotor_env.slow_roll",
      "rotor_env.online", "rotor_env.rig_simulation"),
@@ -45,7 +45,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 #: where no reinforcement-learning stack is installed): they import neither the environments
 #: nor the wrapper.
 GYMNASIUM_FREE = ("identifier", "rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results",
-                  "rotor_env.measurements", "rotor_env.io", "rotor_env.regression", "rotor_env.simulator",
+                  "rotor_env.measurements", "rotor_env.regression", "rotor_env.simulator",
                   "rotor_env.online", "rotor_env.diagnosis", "rotor_env.monitor", "rotor_env.batch",
                   "rotor_env.fleet")
 GYMNASIUM_UNITS = ("rotor_env.envs", "rotor_env.wrappers")
@@ -219,24 +219,13 @@ def test_graph_is_read():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
-#: Cycles between units still open, each closed by the step of issue 23 that moves its code.
-KNOWN_UNIT_CYCLES = [["rotor_env.io", "rotor_env.measurements", "rotor_env.simulator"]]
-
-
 def test_no_import_cycles():
     assert module_cycles() == []
-    assert all(c in KNOWN_UNIT_CYCLES for c in unit_cycles())
-
-
-#: Arrows still pointing up, each removed by the step of issue 23 that moves its code.
-KNOWN_UPWARD = {
-    "rotor_env.measurements.simulated -> rotor_env.simulator",  # rig simulation beside the simulator
-}
+    assert unit_cycles() == []
 
 
 def test_no_arrow_back_up():
-    found = {f"{where.split(':')[0]} -> {target}" for where, target, _ in upward_arrows()}
-    assert found <= KNOWN_UPWARD
+    assert upward_arrows() == []
 
 
 def test_no_private_names_across_modules():

@@ -347,7 +347,7 @@ def load_vector_table(
     ``..._amp_2x``/``..._phase_deg_2x``.  ``angles``: probe name -> mounting angle in
     degrees (from the rig description).  Errors name the file, column, line and value.
     """
-    from ..io import MeasurementError, read_table
+    from .files import MeasurementError, read_table
 
     path = Path(path)
     _check_convention(phase)

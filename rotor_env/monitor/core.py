@@ -28,8 +28,8 @@ from scipy import stats
 from identifier.hac import chi2_log10_sf
 
 from ..effects import EFFECTS
-from ..io import UNIFORM_RTOL, MeasurementError
 from ..measurements import COLUMNS
+from ..measurements.files import UNIFORM_RTOL, MeasurementError
 from ..online import IdentificationCore
 from ..regression import DEFAULT_EFFECTS, build_rows
 from . import kernel as K
@@ -127,7 +127,7 @@ class Monitor:
     "value_before", "value_after", "evidence"}`` and, with ``status_every``, status
     dicts.  Samples are processed in whole blocks; the rest waits for the next chunk
     (the results do not depend on how the stream is cut).  A chunk that is not valid
-    raises :class:`~rotor_env.io.MeasurementError` naming its row, and changes nothing.
+    raises :class:`~rotor_env.measurements.files.MeasurementError` naming its row, and changes nothing.
     """
 
     def __init__(self, config: MonitorConfig | None = None, **options: Any) -> None:
