@@ -31,6 +31,7 @@ from ..effects import EFFECTS
 from ..measurements import COLUMNS
 from ..measurements.files import UNIFORM_RTOL, MeasurementError
 from ..online import IdentificationCore
+from ..outputs import atomic_write
 from ..regression import DEFAULT_EFFECTS, build_rows
 from . import kernel as K
 from .detector import CusumDesign
@@ -390,11 +391,13 @@ class Monitor:
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
         meta = {"version": _STATE_VERSION, "config": asdict(self.config), "events": self.events}
-        tmp = path.with_name(path.name + ".part")
-        with open(tmp, "wb") as fh:
-            np.savez(fh, meta=np.array(json.dumps(meta)), **self._arrays)
-        os.replace(tmp, path)
-        return path
+
+        def write(tmp: Path) -> None:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, meta=np.array(json.dumps(meta)), **self._arrays)
+
+        # refused above unless overwrite: the write itself replaces
+        return atomic_write(path, write, overwrite=True)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Monitor:
