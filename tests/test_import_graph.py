@@ -197,7 +197,7 @@ def upward_arrows() -> list[tuple[str, str, str]]:
             for line, source, _ in _raw_imports(module):
                 if source.split(".")[0] == "gymnasium":
                     found.append((f"{module}:{line}", source, "Gymnasium from a Gymnasium-free unit"))
-    return found
+    return sorted(set(found))  # one per import statement (``from m import a, b`` is one arrow)
 
 
 def private_imports() -> list[str]:
