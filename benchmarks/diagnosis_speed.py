@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from rotor_env.diagnosis import DEFAULT_MODEL, LIBRARY_CANDIDATES, diagnose
-from rotor_env.io import load_measurements
+from rotor_env.measurements.files import load_measurements
 from rotor_env.params import RotorParams
 from rotor_env.regression import build_regression
 from rotor_env.simulator import simulate
@@ -152,7 +152,10 @@ def main(argv=None) -> int:
 _BASELINE_SNIPPET = """
 import json, sys, time
 from rotor_env.diagnosis import DEFAULT_MODEL, LIBRARY_CANDIDATES, diagnose
-from rotor_env.io import load_measurements
+try:
+    from rotor_env.measurements.files import load_measurements
+except ImportError:  # a revision before the readers moved into rotor_env.measurements
+    from rotor_env.io import load_measurements
 path, ip, repeat = sys.argv[1], float(sys.argv[2]), int(sys.argv[3])
 m = load_measurements(path)
 cands = [c for c in LIBRARY_CANDIDATES if c not in DEFAULT_MODEL]

@@ -105,9 +105,9 @@ def _rig_throughput(folder: Path, repeats: int) -> dict[str, float]:
     by 4, noise-free) through :class:`RigStream` alone and into the monitor; peak memory for 1x
     and 4x the run."""
     from rotor_env.measurements.rig import Rig
-    from rotor_env.measurements.simulated import simulate_rig
     from rotor_env.monitor.rig_stream import RigStream
     from rotor_env.params import RotorParams
+    from rotor_env.rig_simulation import simulate_rig
 
     rig = Rig.one_plane({"x": 45, "y": -45}, keyphasor="kp")
     params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005}, effects=("stiffness", "viscous_damping", "unbalance"))

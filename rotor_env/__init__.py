@@ -18,7 +18,7 @@ from .effects import EFFECTS, PACKAGE_EFFECTS, Effect, Parameter, get_effect, re
 # command that only simulates does not pay for scipy, numba and the diagnosis (~2 s).
 _LAZY: dict[str, str] = {
     "Diagnosis": ".diagnosis", "Model": ".diagnosis", "diagnose": ".diagnosis", "fit": ".diagnosis",
-    "MeasurementError": ".io", "load_measurements": ".io",
+    "MeasurementError": ".measurements.files", "load_measurements": ".measurements.files",
     "COLUMNS": ".measurements", "Measurements": ".measurements",
     "Crack": ".params", "RotorParams": ".params",
     "Regression": ".regression", "RegressionSpec": ".regression", "build_regression": ".regression",
@@ -29,8 +29,8 @@ _LAZY: dict[str, str] = {
 
 if TYPE_CHECKING:  # what static tools and IDEs see
     from .diagnosis import Diagnosis, Model, diagnose, fit
-    from .io import MeasurementError, load_measurements
     from .measurements import COLUMNS, Measurements
+    from .measurements.files import MeasurementError, load_measurements
     from .params import Crack, RotorParams
     from .regression import Regression, RegressionSpec, build_regression
     from .simulator import RunUp, SimulationError, Simulator, free_run, simulate

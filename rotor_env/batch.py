@@ -61,7 +61,7 @@ def diagnose_file(file, *, model: str | None = None, ip: float | None = None, al
         rig = load_rig(rig)
     if not vectors and rig is None:
         from .diagnosis import LIBRARY_CANDIDATES, diagnose
-        from .io import load_measurements
+        from .measurements.files import load_measurements
 
         meas = load_measurements(file)
         names = model_list(model, DEFAULT_MODEL)

@@ -254,7 +254,7 @@ def _add_paper_parser(sub) -> None:
 # ---------------------------------------------------------------------- diagnose / fit
 def _load(args):
     from .diagnosis import load_user_effect
-    from .io import load_measurements
+    from .measurements.files import load_measurements
 
     user = [load_user_effect(spec).name for spec in (args.effect or [])]
     return load_measurements(args.file), user
@@ -323,9 +323,9 @@ def _simulate_rig(args: argparse.Namespace, values: dict, ip: float, crack, out)
 
     from .effects import EFFECTS
     from .measurements.rig import load_rig
-    from .measurements.simulated import simulate_rig
     from .outputs import atomic_write
     from .params import RotorParams
+    from .rig_simulation import simulate_rig
 
     rig = load_rig(args.rig)
     # a rig run is a healthy rotor (stiffness, damping, unbalance) plus the effects whose

@@ -32,6 +32,7 @@ from collections import Counter
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from .outputs import atomic_write
 from .ray_cluster import init_ray
 
 __all__ = [
@@ -308,9 +309,8 @@ def format_summary(summary: dict) -> str:
 
 # ---------------------------------------------------------------------- the batch
 def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+    # a re-run replaces what an earlier run of the batch wrote there
+    atomic_write(path, lambda tmp: tmp.write_bytes(data), overwrite=True)
 
 
 def _record(row: dict) -> dict:
@@ -373,9 +373,7 @@ def run_batch(inputs: list[str], out: str | Path, *, workers: int = 1, address: 
     import pyarrow.parquet as pq
 
     table_path = out / "results.parquet"
-    tmp = out / f".results.{os.getpid()}.parquet"
-    pq.write_table(results_table(ordered), tmp)
-    os.replace(tmp, table_path)
+    atomic_write(table_path, lambda tmp: pq.write_table(results_table(ordered), tmp), overwrite=True)
     summary = summarize(ordered)
     _atomic_write(out / "summary.json", json.dumps(summary, indent=2).encode())
     summary_figure(summary, out / "summary.png")

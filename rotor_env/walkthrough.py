@@ -14,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .diagnosis import diagnose
-from .io import load_measurements
+from .measurements.files import load_measurements
 from .outputs import OutputFolder
 from .params import Crack, RotorParams
 from .simulator import simulate

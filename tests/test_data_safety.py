@@ -18,14 +18,14 @@ import pytest
 
 from identifier import RecursiveQR
 from rotor_env import cli
-from rotor_env.io import (
+from rotor_env.measurements import COLUMNS, Measurements
+from rotor_env.measurements.files import (
     MeasurementError,
     _parse_csv,
     _read_csv_arrow,
     load_measurements,
     read_table,
 )
-from rotor_env.measurements import COLUMNS, Measurements
 from rotor_env.params import RotorParams
 from rotor_env.simulator import SimulationTooLarge, free_run, simulate
 
@@ -386,7 +386,7 @@ def test_fast_reader_falls_back_for_exact_lines_and_values(tmp_path, run):
 
 
 def test_large_record_gets_a_note_of_its_cost(tmp_path, monkeypatch, run):
-    import rotor_env.io as io
+    import rotor_env.measurements.files as io
 
     monkeypatch.setattr(io, "LARGE_RECORD", 1000)
     meas = load_measurements(run.to_file(tmp_path / "r.csv"))

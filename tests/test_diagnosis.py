@@ -35,7 +35,7 @@ from rotor_env.diagnosis import (
     load_user_effect,
 )
 from rotor_env.effects import EFFECTS, PHYSICAL_EFFECTS, register_effect
-from rotor_env.io import load_measurements
+from rotor_env.measurements.files import load_measurements
 from rotor_env.params import Crack, RotorParams
 from rotor_env.simulator import simulate
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from rotor_env.diagnosis import fit
-from rotor_env.io import MeasurementError, load_measurements
+from rotor_env.measurements.files import MeasurementError, load_measurements
 from rotor_env.params import RotorParams
 from rotor_env.simulator import SimulationError, simulate
 

@@ -14,8 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from rotor_env.io import MeasurementError, load_measurements
 from rotor_env.measurements import COLUMNS
+from rotor_env.measurements.files import MeasurementError, load_measurements
 from rotor_env.params import RotorParams
 from rotor_env.simulator import simulate
 

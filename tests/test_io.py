@@ -9,8 +9,14 @@ import os
 import numpy as np
 import pytest
 
-from rotor_env.io import DERIVABLE, MIN_ROWS, REQUIRED, MeasurementError, load_measurements
 from rotor_env.measurements import COLUMNS, Measurements
+from rotor_env.measurements.files import (
+    DERIVABLE,
+    MIN_ROWS,
+    REQUIRED,
+    MeasurementError,
+    load_measurements,
+)
 from rotor_env.params import RotorParams
 from rotor_env.simulator import simulate
 

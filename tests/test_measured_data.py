@@ -19,7 +19,6 @@ import pytest
 from rotor_env.diagnosis.from_vectors import diagnose_vectors
 from rotor_env.measurements.keyphasor import KeyphasorError, pulse_edges, spin_from_pulses
 from rotor_env.measurements.rig import Rig, RigError, load_rig
-from rotor_env.measurements.simulated import simulate_rig
 from rotor_env.measurements.vectors import (
     VectorTable,
     VectorTableError,
@@ -29,6 +28,7 @@ from rotor_env.measurements.vectors import (
     to_phase,
 )
 from rotor_env.params import RotorParams
+from rotor_env.rig_simulation import simulate_rig
 
 ONE_PLANE = "keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n"
 

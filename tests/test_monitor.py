@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from rotor_env.io import MeasurementError, load_measurements
+from rotor_env.measurements.files import MeasurementError, load_measurements
 from rotor_env.monitor import Monitor, StreamReader, cusum_threshold, simulate_arl
 from rotor_env.monitor.detector import chi2_sf, norm_ppf
 from rotor_env.monitor.kernel import downdate_row

@@ -10,7 +10,7 @@ import pytest
 
 from rotor_env import RotorParams, simulate
 from rotor_env.cli import main
-from rotor_env.io import load_measurements
+from rotor_env.measurements.files import load_measurements
 from rotor_env.outputs import MARKER, OutputFolder, atomic_write, atomic_write_text
 
 

@@ -19,7 +19,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -28,7 +27,7 @@ import numpy as np
 
 from ..measurements.rig import SPEED_UNITS
 from ..measurements.waveforms import LENGTH_UNIT, RigRecord
-from ..results import jsonable
+from ..results import Result
 from .from_vectors import VectorDiagnosis, diagnose_vectors
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES
 from .oe_diagnosis import OutputErrorDiagnosis, diagnose_output_error
@@ -42,7 +41,7 @@ SLOW_ROLL_FRACTION = 0.3
 
 
 @dataclass
-class RigDiagnosis:
+class RigDiagnosis(Result):
     """The waveform diagnosis and the 1X-vector diagnosis of one rig recording."""
 
     record: RigRecord
@@ -88,9 +87,6 @@ class RigDiagnosis:
             "notes": [*d.get("notes", []), *self.record.notes],
         })
         return d
-
-    def to_json(self, **kwargs) -> str:
-        return json.dumps(jsonable(self.to_dict()), **kwargs)
 
     def summary(self) -> str:
         lines = [f"rig recording {self.record.source} ({self.record.rig.model}, "

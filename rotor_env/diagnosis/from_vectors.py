@@ -21,7 +21,6 @@ Critical speeds (rpm) and damping ratios come from the fitted model's eigenvalue
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -32,7 +31,7 @@ from identifier.hac import hac_covariance, wald_test
 
 from ..effects import get_effect
 from ..measurements.vectors import SPEED_UNITS, VectorTable, to_phase
-from ..results import jsonable
+from ..results import Result, jsonable
 from .synchronous import RUNOUT, SECOND_MODE, SynchronousModel, VectorFit, fit_vectors
 from .verdict import FLOOR_RATIO, verdict_of
 
@@ -161,7 +160,7 @@ def _plausible(fit: VectorFit, effect: str) -> tuple[bool, str]:
 
 
 @dataclass
-class VectorDiagnosis:
+class VectorDiagnosis(Result):
     """What a vector table says: the fits before and after, criticals, the verdict."""
 
     table: VectorTable
@@ -257,9 +256,6 @@ class VectorDiagnosis:
             "notes": list(self.notes),
             "standard_errors_kind": "HAC (Newey-West, Bartlett kernel, Andrews bandwidth), scores summed per row",
         }
-
-    def to_json(self, **kwargs) -> str:
-        return json.dumps(jsonable(self.to_dict()), **kwargs)
 
     def summary(self) -> str:
         d = self.to_dict()

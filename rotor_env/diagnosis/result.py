@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..effects import EFFECTS
-from ..results import jsonable
+from ..results import Result
 from .candidates import Candidate
 from .compare import Comparison, WindowData, compare, known_values
 from .model import Model
@@ -18,7 +17,7 @@ from .verdict import VERDICT_TEXT
 
 
 @dataclass
-class NotIdentifiableResult:
+class NotIdentifiableResult(Result):
     """A record that cannot decide anything (no excitation, too short): said, not guessed."""
 
     source: str | None
@@ -36,9 +35,6 @@ class NotIdentifiableResult:
         return {"source": self.source, "verdict": self.verdict, "reason": self.reason, "ip": self.ip,
                 "ip_estimate": None, "missing": [], "rejected": [], "unexplained": None,
                 "noise_floor": None, "rms_ratio_after": None, "notes": self.notes}
-
-    def to_json(self, **kwargs) -> str:
-        return json.dumps(jsonable(self.to_dict()), **kwargs)
 
     def summary(self) -> str:
         return (f"rotor-id diagnosis of {self.source or 'measurements'}\n"
@@ -60,7 +56,7 @@ class NotIdentifiableResult:
 
 # ------------------------------------------------------------------ the result
 @dataclass
-class Diagnosis(DiagnosisFigures):
+class Diagnosis(DiagnosisFigures, Result):
     """Result of :func:`diagnose`: before/after comparisons, ranking, where it fails."""
 
     source: str | None
@@ -149,9 +145,6 @@ class Diagnosis(DiagnosisFigures):
             "notes": self.notes,
             "lookalikes": self.lookalikes,
         }
-
-    def to_json(self, **kwargs) -> str:
-        return json.dumps(jsonable(self.to_dict()), **kwargs)
 
     def decisions(self) -> dict[str, str]:
         """Each candidate's outcome, from the same source as the turned-down list: ``"added

@@ -357,7 +357,7 @@ def load_vector_table(
     are repeat acquisitions at a few speeds: neither a sweep nor at least 8 rows) and
     :attr:`VectorTable.runs` holds the labels.
     """
-    from ..io import MeasurementError, read_table
+    from .files import MeasurementError, read_table
 
     path = Path(path)
     _check_convention(phase)

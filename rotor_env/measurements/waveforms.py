@@ -116,7 +116,7 @@ class RigRecord:
         """Dimensionless measurements with ``t' = t w_ref`` (see the module docstring)."""
         from scipy.signal import decimate
 
-        from ..io import derive_rates
+        from .files import derive_rates
 
         dt_raw = float(np.median(np.diff(self.t))) * w_ref
         top = float(self.speed.max()) / w_ref
@@ -156,7 +156,7 @@ class RigRecord:
 
 def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
     """Read a waveform file (CSV or Parquet) as the rig describes it."""
-    from ..io import MeasurementError, read_table
+    from .files import MeasurementError, read_table
 
     path = Path(path)
     try:

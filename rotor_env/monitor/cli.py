@@ -77,7 +77,7 @@ def _config(args, dt: float, *, ip: float = 0.3, time_scale: float = 1.0):
 
 
 def run_monitor(args: argparse.Namespace) -> int:
-    from ..io import MeasurementError
+    from ..measurements.files import MeasurementError
     from ..outputs import check_writable
     from .core import Monitor
     from .fleet import open_stream

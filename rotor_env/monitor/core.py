@@ -28,9 +28,10 @@ from scipy import stats
 from identifier.hac import chi2_log10_sf
 
 from ..effects import EFFECTS
-from ..io import UNIFORM_RTOL, MeasurementError
 from ..measurements import COLUMNS
+from ..measurements.files import UNIFORM_RTOL, MeasurementError
 from ..online import IdentificationCore
+from ..outputs import atomic_write
 from ..regression import DEFAULT_EFFECTS, build_rows
 from . import kernel as K
 from .detector import CusumDesign
@@ -127,7 +128,7 @@ class Monitor:
     "value_before", "value_after", "evidence"}`` and, with ``status_every``, status
     dicts.  Samples are processed in whole blocks; the rest waits for the next chunk
     (the results do not depend on how the stream is cut).  A chunk that is not valid
-    raises :class:`~rotor_env.io.MeasurementError` naming its row, and changes nothing.
+    raises :class:`~rotor_env.measurements.files.MeasurementError` naming its row, and changes nothing.
     """
 
     def __init__(self, config: MonitorConfig | None = None, **options: Any) -> None:
@@ -390,11 +391,13 @@ class Monitor:
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path} exists; pass overwrite=True to replace it")
         meta = {"version": _STATE_VERSION, "config": asdict(self.config), "events": self.events}
-        tmp = path.with_name(path.name + ".part")
-        with open(tmp, "wb") as fh:
-            np.savez(fh, meta=np.array(json.dumps(meta)), **self._arrays)
-        os.replace(tmp, path)
-        return path
+
+        def write(tmp: Path) -> None:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, meta=np.array(json.dumps(meta)), **self._arrays)
+
+        # refused above unless overwrite: the write itself replaces
+        return atomic_write(path, write, overwrite=True)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Monitor:

@@ -20,7 +20,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from ..io import MeasurementError
+from ..measurements.files import MeasurementError
 
 __all__ = ["monitor_streams", "open_stream", "watch_stream"]
 

@@ -50,8 +50,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from ..io import UNIFORM_RTOL, MeasurementError
 from ..measurements import COLUMNS
+from ..measurements.files import UNIFORM_RTOL, MeasurementError
 from ..measurements.keyphasor import KeyphasorError, KeyphasorTracker
 from ..measurements.probes import probe_matrix
 from ..measurements.rig import SPEED_UNITS, TIME_UNITS, Rig

@@ -1,6 +1,6 @@
 """Measurement streams read in chunks: a file, a file being appended (``--follow``), stdin.
 
-The formats are :func:`rotor_env.io.load_measurements`' (CSV with a header line, or
+The formats are :func:`rotor_env.measurements.files.load_measurements`' (CSV with a header line, or
 Parquet; required ``t, phi, theta_x, theta_y``, rates and accelerations optional) and so
 are the errors: they name the source, the (1-based) line and the column.  Nothing is
 loaded whole: CSV text is read in blocks of bytes, only complete lines are parsed
@@ -10,7 +10,7 @@ hands out the raw file columns (the rig adapter, :mod:`.rig_stream`, reads SI wa
 through it); iterating the reader validates them as the model's ten columns.
 
 Missing rates and accelerations are estimated as ``load_measurements`` does
-(Savitzky-Golay, :func:`rotor_env.io.derive_rates`), on a sliding buffer: a sample's
+(Savitzky-Golay, :func:`rotor_env.measurements.files.derive_rates`), on a sliding buffer: a sample's
 derivative needs half a window of samples after it, so those are held back until they
 arrive (or the stream ends).  An encoder's ``phi`` wrapped to one turn is unwrapped.
 """
@@ -32,8 +32,8 @@ from typing import BinaryIO
 import numpy as np
 from scipy.signal import savgol_filter
 
-from ..io import DERIVABLE, MAX_TILT, REQUIRED, UNIFORM_RTOL, MeasurementError
 from ..measurements import COLUMNS
+from ..measurements.files import DERIVABLE, MAX_TILT, REQUIRED, UNIFORM_RTOL, MeasurementError
 
 __all__ = ["StreamReader", "iter_chunks", "read_ahead"]
 
@@ -350,7 +350,7 @@ class StreamReader:
 
 
 class SlidingDerivatives:
-    """Savitzky-Golay rates and accelerations on a sliding buffer (as :func:`rotor_env.io.derive_rates`)."""
+    """Savitzky-Golay rates and accelerations on a sliding buffer (as :func:`rotor_env.measurements.files.derive_rates`)."""
 
     def __init__(self, names: list[str], dt: float) -> None:
         self.targets = [(COLUMNS.index(c), COLUMNS.index(DERIVABLE[c][0]), DERIVABLE[c][1]) for c in names]

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import savgol_filter
 
-from .measurements import COLUMNS, Measurements
+from .core import COLUMNS, Measurements
 
 __all__ = ["REQUIRED", "MeasurementError", "derive_rates", "load_measurements", "read_table"]
 

@@ -1,12 +1,12 @@
 """Simulated rig recordings: the model's run written as a rig would record it.
 
 The simulator runs in dimensionless units; a natural frequency (rpm) maps its time to
-seconds, :data:`~.waveforms.LENGTH_UNIT` its translation to metres.  The output is what
+seconds, :data:`~rotor_env.measurements.waveforms.LENGTH_UNIT` its translation to metres.  The output is what
 a data acquisition system writes — time in s, a keyphasor pulse (a notch: the signal
 dips from 0 to -5 V for 1/20 of a turn) and each probe's reading (in the rig's unit,
 with its DC gap, optional runout and Gaussian noise; the notch's edges ramp over 1/100
 of a turn, as a probe tip a few millimetres wide sees a notch) — or what a condition-monitoring
-system exports: the order-tracked vectors per revolution (:class:`~.vectors.VectorTable`).
+system exports: the order-tracked vectors per revolution (:class:`~rotor_env.measurements.vectors.VectorTable`).
 Everything is reproducible from ``seed``.
 """
 
@@ -17,11 +17,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..params import RotorParams
-from ..simulator import RunUp, Simulator
-from .rig import SPEED_UNITS, Rig
-from .vectors import VectorTable, order_track
-from .waveforms import LENGTH_UNIT
+from .measurements.rig import SPEED_UNITS, Rig
+from .measurements.vectors import VectorTable, order_track
+from .measurements.waveforms import LENGTH_UNIT
+from .params import RotorParams
+from .simulator import RunUp, Simulator
 
 __all__ = ["RigRun", "simulate_rig"]
 
