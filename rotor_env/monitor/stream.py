@@ -168,17 +168,23 @@ class StreamReader:
                 self._check_line_length(rest)
                 continue
             block, rest = rest[: cut + 1], rest[cut + 1 :]
-            self._check_line_length(rest)
-            longest = max(map(len, block.split(b"\n"))) if len(block) > MAX_LINE_BYTES else 0
-            if longest > MAX_LINE_BYTES:
-                self._check_line_length(b"x" * longest)
             if header is None:
                 first = block.index(b"\n")
                 header = self._header(block[:first])
                 block = block[first + 1 :]
                 self.line = 1
+            if len(block) > MAX_LINE_BYTES:
+                # a complete line too long: the rows before it go out first, then the error
+                sizes = [len(x) for x in block.split(b"\n")]
+                long = next((i for i, n in enumerate(sizes) if n > MAX_LINE_BYTES), None)
+                if long is not None:
+                    good = b"".join(x + b"\n" for x in block.split(b"\n")[:long])
+                    if good:
+                        yield from self._parsed(good, header)
+                    self._check_line_length(b"x" * sizes[long])
             if block:
                 yield from self._parsed(block, header)
+            self._check_line_length(rest)
         if rest.strip():
             if header is None:
                 header = self._header(rest)
