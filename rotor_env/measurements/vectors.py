@@ -383,7 +383,7 @@ def load_vector_table(
         raise VectorTableError(f"{path}: column(s) {_cut(dup)} appear more than once")
     speed_col = next((c for c in ("rpm", "speed_rpm", "speed") if c in lower), None)
     if speed_col is None:
-        raise VectorTableError(f"{path}: no speed column: expected 'rpm' (found columns {header})")
+        raise VectorTableError(f"{path}: no speed column: expected 'rpm' (found columns {_cut(header)})")
     unit = "rpm" if speed_col != "speed" else speed_unit
     col = {h.lower(): i for i, h in enumerate(header)}
     probes: dict[str, dict[int, tuple[int, int]]] = {}
@@ -398,7 +398,7 @@ def load_vector_table(
                 probes.setdefault(name, {})[n] = (col[h], col[ph])
     if not probes:
         raise VectorTableError(f"{path}: no amplitude columns: expected 'amp' and 'phase_deg' "
-                               f"(or NAME_amp, NAME_phase_deg per probe); found {header}")
+                               f"(or NAME_amp, NAME_phase_deg per probe); found {_cut(header)}")
     if any(1 not in v for v in probes.values()):
         bad = next(k for k, v in probes.items() if 1 not in v)
         raise VectorTableError(f"{path}: probe {bad!r} has no 1X columns ({bad}_amp, {bad}_phase_deg)")

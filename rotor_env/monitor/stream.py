@@ -225,9 +225,9 @@ class StreamReader:
         missing = [c for c in self.required if c not in header]
         if missing and self.missing_hint is not None:
             raise MeasurementError(f"{self.name}: column(s) {missing} {self.missing_hint} are not in the stream "
-                                   f"(its header has {header})")
+                                   f"(its header has {str(header)[:300]})")
         if missing:
-            raise MeasurementError(f"{self.name}: missing required column(s) {missing}; the header has {header}; "
+            raise MeasurementError(f"{self.name}: missing required column(s) {missing}; the header has {str(header)[:300]}; "
                                    f"required: {list(REQUIRED)}, optional: {list(DERIVABLE)}")
         self._header_names = header
         return header
