@@ -99,6 +99,13 @@ class RigRecord:
             if len(full) < 2:
                 raise WaveformError(f"{self.source}: slow_roll_rpm {below_rpm:g}: fewer than two revolutions below "
                                     f"it (the slowest is {self.rpm.min():.0f} rpm)")
+            top = float(self.rpm.max())
+            if below_rpm > MAX_SLOW_ROLL_SHARE * top:
+                # a "slow roll" over most of the run subtracts the vibration itself (a crack's 1X/2X
+                # then reads as a bow): slow roll is well below the run's speeds and its criticals
+                raise WaveformError(f"{self.source}: slow_roll_rpm {below_rpm:g} is above {MAX_SLOW_ROLL_SHARE:.0%} of "
+                                    f"the run's top speed ({top:.0f} rpm): the slow-roll revolutions would be most of "
+                                    "the run; give the speed below which the shaft only shows its runout")
             bins = 64
             idx = ((self.phi % (2 * math.pi)) / (2 * math.pi) * bins).astype(int) % bins
             for n, x in self.readings.items():
@@ -159,6 +166,8 @@ MAX_PROBE_M = 0.025
 #: a run-up whose top speed is outside these (rpm) has its time in another unit
 MIN_TOP_RPM = 30.0
 MAX_RPM = 1e6
+#: slow roll is a small part of the run: above this share of the top speed it is the run itself
+MAX_SLOW_ROLL_SHARE = 0.5
 
 
 def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
