@@ -212,9 +212,10 @@ def train_rllib(
         raise ValueError(f"model_features must be one of {FEATURES}, got {model_features!r}")
     if workers < 0:
         raise ValueError(f"workers must be >= 0, got {workers}")
+    from rotor_env.outputs import OutputFolder
+
     out = Path(out)
-    if out.exists() and any(out.iterdir()) and not force:
-        raise FileExistsError(f"{out} exists and is not empty; use --force to overwrite it")
+    OutputFolder.check(out, force=force)  # said before Ray starts
     model_features = model_features if identifier else "none"
     stream = stream or sys.stderr
     started_ray = not ray.is_initialized()
@@ -224,8 +225,10 @@ def train_rllib(
     try:
         config, info = ppo_config(env_id, identifier=identifier, model_features=model_features, residual=residual,
                                   seed=seed, workers=workers, hyperparams=hyperparams, overrides=overrides)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "logs").mkdir(exist_ok=True)
+        # new, empty, or a previous run's (its marker): --force replaces only that run's files
+        folder = OutputFolder(out, force=force)
+        folder.register(["policy.npz", "vecnormalize.npz", "run.json", "logs/progress.csv"])
+        before = folder.snapshot()
         algo = config.build_algo()
         rows = _train_loop(algo, int(steps), out / "logs", stream)
         obs_mean, obs_var = _filter_stats(algo)
@@ -257,7 +260,8 @@ def train_rllib(
     finally:
         if started_ray:
             ray.shutdown()
-    (out / "run.json").write_text(json.dumps(run, indent=2))
+    folder.write_text("run.json", json.dumps(run, indent=2))
+    folder.adopt_new(before)  # the TensorBoard event files
     if eval_episodes > 0:  # the saved policy, as evaluate --model will load it
         policy = load_rllib_policy(out)
         env_obs = make_env(env_id, identifier=True)  # evaluate sees the wrapper's layout
@@ -267,7 +271,8 @@ def train_rllib(
         run["eval"] = {"seeds": [EVAL_SEED + seed + i for i in range(eval_episodes)],
                        "return": statistics(returns)}
         run["eval_mean_reward"] = float(np.mean(returns))
-        (out / "run.json").write_text(json.dumps(run, indent=2))
+        folder.write_text("run.json", json.dumps(run, indent=2))
+    folder.adopt_new(before)  # the TensorBoard event files
     return out
 
 

@@ -270,10 +270,13 @@ def train(
         raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
-    out = Path(out)
-    if out.exists() and any(out.iterdir()) and not force:
-        raise FileExistsError(f"{out} exists and is not empty; use --force to overwrite it")
-    out.mkdir(parents=True, exist_ok=True)
+    from rotor_env.outputs import OutputFolder
+
+    # new, empty, or a previous run's (its marker): --force replaces only that run's files
+    folder = OutputFolder(out, force=force)
+    out = folder.path
+    folder.register(["model.zip", "vecnormalize.npz", "run.json", "logs/progress.csv", "eval/evaluations.npz"])
+    before = folder.snapshot()
     hp = load_hyperparams(env_id, algo, hyperparams, residual=bool(residual))
     n_envs = int(hp.pop("n_envs", 1))
     policy = hp.pop("policy", "MlpPolicy")
@@ -312,7 +315,8 @@ def train(
         "features": venv.venv.envs[0].get_wrapper_attr("features").to_json() if model_features != "none" else None,
         "residual": venv.venv.envs[0].get_wrapper_attr("residual").to_json() if residual else None,
     }
-    (out / "run.json").write_text(json.dumps(run, indent=2))
+    folder.write_text("run.json", json.dumps(run, indent=2))
+    folder.adopt_new(before)  # the TensorBoard event files SB3 named itself
     venv.close()
     eval_env.close()
     return out

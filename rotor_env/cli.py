@@ -223,9 +223,19 @@ def _cmd_paper(args: argparse.Namespace) -> int:
     from .paper import run_paper, table2
 
     out = Path(args.out) if args.out else None
-    if out is not None and out.exists() and any(out.iterdir()) and not args.force:
-        raise _UsageError(f"{out} exists and is not empty; use --force to write into it")
-    cases = run_paper(out, seed=args.seed, progress=sys.stderr.isatty() and not args.json)
+    if out is not None:
+        from .outputs import OutputFolder
+
+        OutputFolder.check(out, force=args.force)  # said before the computation
+    cases = run_paper(None, seed=args.seed, progress=sys.stderr.isatty() and not args.json)
+    if out is not None:
+        from .paper import plot_figures, write_tables
+
+        folder = OutputFolder(out, force=args.force)
+        with folder.staging() as tmp:
+            plot_figures(cases, tmp)
+            write_tables(cases, tmp)
+            (tmp / "table2_t300.json").write_text(json.dumps(table2(cases), indent=2))
     if args.json:
         print(json.dumps(table2(cases, 300.0)))
     else:
@@ -247,7 +257,8 @@ def _add_paper_parser(sub) -> None:
     p.add_argument("--out", metavar="DIR", help="write Fig. 3-5 (PNG) and Table 2 (Markdown, CSV) here")
     p.add_argument("--json", action="store_true", help="print Table 2 at t = 300 as JSON")
     p.add_argument("--seed", type=int, default=0, help="seed of the noise on y (default 0)")
-    p.add_argument("--force", action="store_true", help="write into a non-empty --out folder")
+    p.add_argument("--force", action="store_true", help="replace the files of a previous run in --out (never "
+                   "files rotor-id did not write)")
     p.set_defaults(func=_cmd_paper)
 
 
@@ -273,15 +284,11 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
             raise _UsageError(f"--report {args.report}: the report is HTML; name it .html")
         check_writable(args.report, overwrite=args.force)
     if args.figures:
-        figs = Path(args.figures)
-        if figs.exists() and not figs.is_dir():
-            raise _UsageError(f"--figures {figs}: is a file, not a folder")
-        if figs.is_dir() and any(figs.iterdir()) and not args.force:
-            raise _UsageError(f"{figs} exists; use --force to overwrite it")
-        parent = figs if figs.is_dir() else figs.parent
-        if not parent.is_dir():
-            raise _UsageError(f"--figures {figs}: folder {parent} does not exist")
-        check_writable(parent / ".rotor-id-probe", overwrite=True)
+        from .outputs import OutputFolder
+
+        # a folder rotor-id did not write is refused now, before the computation; with
+        # --force only the figures of a previous run (the marker's list) are replaced
+        OutputFolder.check(args.figures, force=args.force)
     if args.vectors or args.rig:
         result = _diagnose_measured(args)
     else:
@@ -294,7 +301,11 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         result = diagnose(meas, model, candidates=candidates, ip=args.ip, alpha=args.alpha, slow_roll=args.slow_roll,
                           progress=sys.stderr.isatty() and not args.json)
     if args.figures:
-        result.save_figures(args.figures)
+        from .outputs import OutputFolder
+
+        folder = OutputFolder(args.figures, force=args.force)
+        with folder.staging() as tmp:
+            result.save_figures(tmp)
     if args.report:
         result.report(args.report, overwrite=args.force)
     if args.json:

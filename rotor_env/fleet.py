@@ -89,16 +89,31 @@ def _dataset_ids(path: Path, column: str) -> list | None:
     return sorted((v for v in values if v is not None), key=lambda v: (str(type(v)), v))
 
 
-def find_recordings(inputs: list[str], id_column: str = DEFAULT_ID_COLUMN) -> list[Recording]:
+def _in_output_folder(path: Path, exclude: list[Path], root: Path | str) -> bool:
+    """``path`` lies in an excluded folder, or in a folder rotor-id wrote (its marker) below
+    the input ``root``: results of a batch are never taken for recordings by the next one."""
+    from .outputs import MARKER
+
+    real = Path(os.path.realpath(path))
+    top = Path(os.path.realpath(root))
+    return any(p in exclude or (top in p.parents and (p / MARKER).is_file()) for p in real.parents)
+
+
+def find_recordings(inputs: list[str], id_column: str = DEFAULT_ID_COLUMN,
+                    exclude: list[Path] | None = None) -> list[Recording]:
     """The recordings named by ``inputs``: files, folders (their ``.csv``/``.parquet``
     files, recursively), globs, or Parquet datasets (a file or a folder) with ``id_column``.
+    Files inside a folder rotor-id wrote (or one of ``exclude``) are left out of folders and globs.
     Raises ``ValueError`` for an input that names nothing and for two recordings of one id."""
+    exclude = [Path(os.path.realpath(p)) for p in exclude or []]
     out: list[Recording] = []
     for item in inputs:
         path = Path(item)
         if not path.exists() and any(ch in item for ch in "*?["):
             matches = sorted(glob.glob(item, recursive=True))
-            files = [Path(m) for m in matches if Path(m).is_file()]
+            prefix = re.split(r"[*?\[]", item)[0]  # the folder the pattern starts in
+            top = Path(prefix or ".") if prefix.endswith(("/", os.sep)) or not prefix else Path(prefix).parent
+            files = [Path(m) for m in matches if Path(m).is_file() and not _in_output_folder(Path(m), exclude, top)]
             if not files:
                 raise ValueError(f"{item}: the pattern matches no file")
             out.extend(_file_recordings(files, None, id_column))
@@ -108,7 +123,8 @@ def find_recordings(inputs: list[str], id_column: str = DEFAULT_ID_COLUMN) -> li
             if ids is not None:
                 out.extend(Recording(str(v), str(path), id_column, json.dumps(v)) for v in ids)
                 continue
-            files = sorted(p for p in path.rglob("*") if p.is_file() and p.suffix.lower() in SUFFIXES)
+            files = sorted(p for p in path.rglob("*") if p.is_file() and p.suffix.lower() in SUFFIXES
+                           and not _in_output_folder(p, exclude, path))
             if not files:
                 raise ValueError(f"{item}: the folder holds no .csv or .parquet file")
             out.extend(_file_recordings(files, path, id_column))
@@ -338,12 +354,16 @@ def run_batch(inputs: list[str], out: str | Path, *, workers: int = 1, address: 
         from .batch import model_list
 
         model_list(options["model"], ())  # refuses a bad effect name before any work
-    recordings = find_recordings(inputs, id_column)
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out}: is a file, not a folder")
+    from .outputs import OutputFolder
+
+    # a new or empty folder, or one a previous batch wrote (its marker: the run resumes);
+    # a folder holding anything else is refused before any work — its files are never replaced
+    OutputFolder.check(out, resume=True)
+    recordings = find_recordings(inputs, id_column, exclude=[out])
+    folder = OutputFolder(out, resume=True)
     rec_dir = out / "recordings"
-    rec_dir.mkdir(parents=True, exist_ok=True)
+    rec_dir.mkdir(exist_ok=True)
     if options.get("reports"):
         (out / "reports").mkdir(exist_ok=True)
     say = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
@@ -367,16 +387,19 @@ def run_batch(inputs: list[str], out: str | Path, *, workers: int = 1, address: 
         say(f"rotor-id batch: {skipped} of {len(recordings)} recordings already done in {out} (skipped)")
     t0 = time.perf_counter()
     records = {k: v for k, v in previous.items() if v is not None}
+    # every file the run may write, in the marker before it is written (one marker write)
+    folder.register([f"recordings/{_safe_name(r.id)}.json" for r in todo]
+                    + ([f"reports/{_safe_name(r.id)}.html" for r in todo] if options.get("reports") else [])
+                    + ["results.parquet", "summary.json", "summary.png"])
     if todo:
         records.update(_run_on_ray(todo, options, workers, address, out, rec_dir, progress, say))
     ordered = [records[r.id] for r in recordings if r.id in records]
     import pyarrow.parquet as pq
 
-    table_path = out / "results.parquet"
-    atomic_write(table_path, lambda tmp: pq.write_table(results_table(ordered), tmp), overwrite=True)
+    table_path = folder.write("results.parquet", lambda p: pq.write_table(results_table(ordered), p))
     summary = summarize(ordered)
-    _atomic_write(out / "summary.json", json.dumps(summary, indent=2).encode())
-    summary_figure(summary, out / "summary.png")
+    folder.write_bytes("summary.json", json.dumps(summary, indent=2).encode())
+    folder.write("summary.png", lambda p: summary_figure(summary, p))
     return {"summary": summary, "table": str(table_path), "done": len(todo), "skipped": skipped,
             "seconds": time.perf_counter() - t0}
 

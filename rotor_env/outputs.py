@@ -92,31 +92,62 @@ class OutputFolder:
     they are written, so an interrupted run can be replaced too).
     """
 
-    def __init__(self, path: str | os.PathLike, *, force: bool = False) -> None:
+    def __init__(self, path: str | os.PathLike, *, force: bool = False, resume: bool = False) -> None:
         self.path = Path(path)
-        if self.path.exists() and not self.path.is_dir():
-            raise ValueError(f"{self.path} exists and is a file, not an output folder")
         marker = self.path / MARKER
-        if self.path.is_dir() and any(self.path.iterdir()):
-            if not marker.is_file():
-                raise FileExistsError(
-                    f"{self.path} is not empty and was not written by rotor-id (no {MARKER}); "
-                    "choose an empty or new folder — --force never deletes files rotor-id did not write"
-                )
-            if not force:
-                raise FileExistsError(f"{self.path} holds a previous output; use --force to replace it")
-            self._remove_previous(marker)
-        self.path.mkdir(parents=True, exist_ok=True)
+        previous = self.check(self.path, force=force, resume=resume)
+        self.files: list[str] = []
+        if previous is not None:
+            if resume and not force:
+                # a resumed run: the files listed are the tool's own (only plain files inside it)
+                self.files = [f for f in previous if self._inside(f)]
+            else:
+                self._remove_previous(marker)
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:  # a dangling symbolic link, say
+            raise ValueError(f"{self.path} exists and is not a folder") from None
         if not os.access(self.path, os.W_OK | os.X_OK):
             raise PermissionError(f"cannot write into {self.path}: the folder is not writable")
-        self.files: list[str] = []
         self._save_marker()
 
-    def _remove_previous(self, marker: Path) -> None:
+    @staticmethod
+    def check(path: str | os.PathLike, *, force: bool = False, resume: bool = False) -> list[str] | None:
+        """Refuse ``path`` as an output folder, without touching anything, when it could not
+        be prepared (so that a command can say so before its computation).
+
+        Returns the files a previous run listed in the marker (None: no marker).
+        ``resume``: a folder with the marker is taken over as it is (a run that
+        continues), without ``force``.
+        """
+        path = Path(path)
+        if path.is_symlink() and not path.exists():
+            raise ValueError(f"{path} is a broken symbolic link, not an output folder")
+        if path.exists() and not path.is_dir():
+            raise ValueError(f"{path} exists and is a file, not an output folder")
+        if not path.is_dir():
+            return None
+        marker = path / MARKER
+        owned = marker.is_file() and not marker.is_symlink()
+        if not owned:
+            if any(path.iterdir()):
+                raise FileExistsError(
+                    f"{path} is not empty and was not written by rotor-id (no {MARKER}); "
+                    "choose an empty or new folder — --force never deletes files rotor-id did not write"
+                )
+            return None
         try:
             listed = json.loads(marker.read_text(encoding="utf-8")).get("files", [])
         except (OSError, ValueError, AttributeError) as exc:
-            raise ValueError(f"{marker}: unreadable marker ({exc}); remove the folder by hand") from None
+            raise ValueError(f"{marker}: unreadable marker ({str(exc)[:200]}); remove the folder by hand") from None
+        if not isinstance(listed, list):
+            raise ValueError(f"{marker}: unreadable marker (its 'files' is not a list); remove the folder by hand")
+        if not (force or resume):
+            raise FileExistsError(f"{path} holds a previous output; use --force to replace it")
+        return [str(f) for f in listed]
+
+    def _remove_previous(self, marker: Path) -> None:
+        listed = self.check(self.path, force=True) or []
         root = self.path.resolve()
         dirs = set()
         for rel in listed:
@@ -136,17 +167,74 @@ class OutputFolder:
                           overwrite=True)
 
     def file(self, relative: str) -> Path:
-        """Register ``relative`` as written by the tool and return its full path."""
-        if relative not in self.files:
-            self.files.append(relative)
+        """Register ``relative`` as written by the tool and return its full path.
+
+        A file already there that the tool did not write (a user's, or a link) is refused:
+        ``--force`` replaces only the tool's own files.
+        """
+        self.register([relative])
+        return self.path / relative
+
+    def register(self, relatives) -> None:
+        """Register many files at once (one marker write), refusing any a user owns."""
+        new = [str(r) for r in relatives if str(r) not in self.files]
+        if not new:
+            return
+        for rel in dict.fromkeys(new):
+            target = self.path / rel
+            if not self._inside(rel):
+                raise ValueError(f"{rel[:200]}: an output file must lie inside {self.path}")
+            if target.exists() or target.is_symlink():
+                raise FileExistsError(f"{target} exists and was not written by rotor-id; "
+                                      "move it away — rotor-id never replaces a file it did not write")
+        self.files.extend(dict.fromkeys(new))
+        self._save_marker()
+        for rel in new:
+            (self.path / rel).parent.mkdir(parents=True, exist_ok=True)
+
+    def _inside(self, relative: str) -> bool:
+        """``relative`` names a place inside the folder (no '..', no absolute path, no link out)."""
+        if Path(relative).is_absolute():
+            return False
+        return self.path.resolve() in (self.path / relative).resolve().parents
+
+    def adopt_new(self, before: set[Path]) -> None:
+        """Register the files that appeared in the folder since ``before`` (:meth:`snapshot`),
+        e.g. log files a library named itself."""
+        mine = {self.path / f for f in self.files} | {self.path / MARKER}
+        new = sorted(p for p in self.snapshot() - before if p not in mine)
+        self.files.extend(str(p.relative_to(self.path)) for p in new)
+        if new:
             self._save_marker()
-        target = self.path / relative
-        target.parent.mkdir(parents=True, exist_ok=True)
-        return target
+
+    def snapshot(self) -> set[Path]:
+        """Every file under the folder now."""
+        return {p for p in self.path.rglob("*") if p.is_file() or p.is_symlink()}
+
+    @contextlib.contextmanager
+    def staging(self):
+        """A hidden temporary folder inside this one: a writer that picks its own file names
+        (``save_figures``) writes there; on success each file is moved in (registered
+        first, so a user's file of that name is refused, never replaced)."""
+        import shutil
+        import tempfile
+
+        tmp = Path(tempfile.mkdtemp(prefix=".rotor-id-staging-", dir=self.path))
+        try:
+            yield tmp
+            files = sorted(p for p in tmp.rglob("*") if p.is_file())
+            self.register([str(p.relative_to(tmp)) for p in files])
+            for p in files:
+                os.replace(p, self.path / p.relative_to(tmp))
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
 
     def write(self, relative: str, write: Callable[[Path], None]) -> Path:
         """Write one file atomically (replacing the tool's own file of that name)."""
         return atomic_write(self.file(relative), write, overwrite=True)
+
+    def write_bytes(self, relative: str, data: bytes) -> Path:
+        return self.write(relative, lambda p: p.write_bytes(data))
 
     def write_text(self, relative: str, text: str) -> Path:
         return self.write(relative, lambda p: p.write_text(text, encoding="utf-8"))

@@ -2,7 +2,7 @@
 
 The rotors are :class:`rotor_env.balance.simulate.DiskRotor` (disks on a shaft solved in the
 frequency domain: linear, anisotropic, or with a clearance) and, for the model-based
-unbalance, the project's own rig simulator (:func:`rotor_env.measurements.simulated.simulate_rig`).
+unbalance, the project's own rig simulator (:func:`rotor_env.rig_simulation.simulate_rig`).
 """
 
 from __future__ import annotations
@@ -381,8 +381,8 @@ def test_model_based_unbalance_agrees_with_the_influence_coefficients(tmp_path):
     weight) and the influence coefficients of all three give the same g·mm and angle, and
     both the truth."""
     from rotor_env.measurements.rig import load_rig
-    from rotor_env.measurements.simulated import simulate_rig
     from rotor_env.params import RotorParams
+    from rotor_env.rig_simulation import simulate_rig
 
     rig_path = tmp_path / "rig.yaml"
     rig_path.write_text("keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n")
@@ -423,9 +423,9 @@ def test_run_up_vectors_are_real_linear_and_told_so():
     import cmath
 
     from rotor_env.measurements.rig import Probe, Rig
-    from rotor_env.measurements.simulated import simulate_rig
     from rotor_env.measurements.vectors import VectorTable
     from rotor_env.params import RotorParams
+    from rotor_env.rig_simulation import simulate_rig
 
     rig = Rig(probes=(Probe("x", math.radians(45.0)), Probe("y", math.radians(-45.0))))
     camp = _campaign("A", _many_weights(), speed_tolerance_rpm=1.0)

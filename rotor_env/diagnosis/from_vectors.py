@@ -446,7 +446,8 @@ def diagnose_vectors(
     log10_alpha = min(math.log10(alpha), LOG10_P_MAX)
     remaining = [c for c in candidates if c not in current.model.names]
     if table.angles is None and len(table.probes) > 1:
-        skip = [c for c in remaining if c != RUNOUT and get_effect(c).name in ("support_anisotropy",)]
+        # runout and a second mode are the vector model's own terms, not registered effects
+        skip = [c for c in remaining if c not in (RUNOUT, SECOND_MODE) and get_effect(c).name in ("support_anisotropy",)]
         if skip:
             notes.append(f"probe angles unknown (no rig description): {', '.join(skip)} not tested; give --rig")
             remaining = [c for c in remaining if c not in skip]

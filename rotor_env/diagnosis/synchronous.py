@@ -81,6 +81,10 @@ VECTOR_EFFECTS: Sequence[str] = DerivedNames(synchronous_effects)
 QUASI_STEADY_TOL = 0.01
 #: the record starts this many revolutions before the first row (initial transient settles)
 LEAD_IN_REVS = 2.0
+#: the transient model's grid (about 200 bytes a sample with the tracking) stays below this
+MAX_TRANSIENT_SAMPLES = 4_000_000
+#: the fitted natural frequency stays within this factor of the run's speeds
+W_REF_DECADES = 10.0
 
 
 def _classify(name: str) -> str:
@@ -332,6 +336,13 @@ def _profile(tau: np.ndarray, W: np.ndarray) -> _Profile:
     # RK4 and the trapezoid in phi: 48 steps a turn keep both below 1e-4 of the peak
     h = min(0.05, 2 * math.pi / (48.0 * w_max))
     t0, t1 = float(tau[0]) - lead, float(tau[-1]) + 2 * math.pi / max(float(W[-1]), 1e-3)
+    n_grid = (t1 + h - t0) / h
+    if not n_grid <= MAX_TRANSIENT_SAMPLES:
+        # the grid is 48 samples a turn of the fastest row: a table spanning too many turns
+        # (time in ms read as s, a phase in radians pulling w_ref away) would take gigabytes
+        raise ValueError(f"the transient model of this table would need {n_grid:.3g} integration samples "
+                         f"({n_grid * 200 / 1e9:.3g} GB), beyond {MAX_TRANSIENT_SAMPLES:g}: the run spans too many "
+                         "revolutions (is the time column in seconds, the phase in degrees?)")
     grid = np.arange(t0, t1 + h, h)
     # before the first row the profile goes on as it came in (linearly): the first row's
     # revolution starts half a turn before its mid-time, and its angle must be the data's
@@ -584,6 +595,10 @@ def fit_vectors(
             starts.append(np.array(x))
     lower = np.full(1 + n_struct, -np.inf)
     upper = np.full(1 + n_struct, np.inf)
+    # a natural frequency a decade beyond the run cannot be read from its 1X vectors, and the
+    # transient grid (48 steps a turn, 125 a natural period) grows without bound towards it
+    lower[0] = math.log(float(table.speed.min()) / W_REF_DECADES)
+    upper[0] = math.log(float(table.speed.max()) * W_REF_DECADES)
     for m in range(prob.n_extra):
         k = 1 + n_struct - 2 * (prob.n_extra - m)
         lower[k], upper[k] = math.log(0.3 * float(table.speed.min())), math.log(2.0 * float(table.speed.max()))

@@ -42,6 +42,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -112,42 +113,136 @@ class Rig:
         return _build({"probes": dict(angles), **kwargs}, "<rig>")
 
 
+#: a rig description is a few lines: a file beyond this is not one (and is not read whole)
+MAX_RIG_BYTES = 1_000_000
+#: nesting deeper than this is no rig description (and would exhaust the parser's recursion)
+MAX_RIG_DEPTH = 8
+#: a value shown in an error message is cut to this many characters
+SHOW_CHARS = 80
+
+
+def _show(value) -> str:
+    """``repr(value)`` cut to :data:`SHOW_CHARS` (a hostile file's value is never echoed whole)."""
+    try:
+        text = repr(value)
+    except ValueError:  # an int too long for repr
+        text = f"<a number of more than {sys.get_int_max_str_digits()} digits>"
+    return text if len(text) <= SHOW_CHARS else text[: SHOW_CHARS - 15] + f"... ({len(text)} chars)"
+
+
+def _yaml_loader():
+    """A safe YAML loader that refuses anchors and aliases (a few hundred bytes of aliases
+    expand to gigabytes) and nesting deeper than :data:`MAX_RIG_DEPTH`."""
+    import yaml
+
+    class RigLoader(yaml.SafeLoader):
+        depth = 0
+
+        def compose_node(self, parent, index):
+            event = self.peek_event()
+            where = f"line {event.start_mark.line + 1}, column {event.start_mark.column + 1}"
+            if isinstance(event, yaml.AliasEvent) or getattr(event, "anchor", None) is not None:
+                raise RigError(f"{where}: YAML anchors and aliases (&, *) are not accepted in a rig description; "
+                               "write the values out")
+            self.depth += 1
+            if self.depth > MAX_RIG_DEPTH:
+                raise RigError(f"{where}: nested more than {MAX_RIG_DEPTH} levels deep: not a rig description")
+            try:
+                return super().compose_node(parent, index)
+            finally:
+                self.depth -= 1
+
+    return RigLoader
+
+
 def load_rig(path: str | os.PathLike) -> Rig:
     """Read and validate a rig description (``.yaml``/``.yml`` or ``.json``)."""
     path = Path(path)
     if not path.is_file():
         raise RigError(f"{path}: no such rig description")
-    text = path.read_text(encoding="utf-8")
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_RIG_BYTES + 1)
+    except OSError as exc:
+        raise RigError(f"{path}: cannot read the rig description ({exc.strerror or exc})") from None
+    if len(data) > MAX_RIG_BYTES:
+        raise RigError(f"{path}: larger than {MAX_RIG_BYTES // 1000} kB: not a rig description (a few lines of YAML "
+                       "or JSON)")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise RigError(f"{path}, line {line}: not a text (UTF-8) file ({exc.reason} at byte {exc.start})") from None
     if path.suffix.lower() in (".yaml", ".yml"):
         try:
             import yaml
         except ImportError:  # pragma: no cover - pyyaml is a dependency
             raise RigError(f"{path}: reading YAML needs pyyaml (pip install pyyaml), or write the rig as JSON") from None
         try:
-            raw = yaml.safe_load(text)
+            raw = yaml.load(text, Loader=_yaml_loader())
+        except RigError as exc:
+            raise RigError(f"{path}, {exc}") from None
         except yaml.YAMLError as exc:
-            raise RigError(f"{path}: not valid YAML ({exc})") from None
+            mark = getattr(exc, "problem_mark", None)
+            where = f", line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+            problem = getattr(exc, "problem", None) or str(exc)
+            raise RigError(f"{path}{where}: not valid YAML ({_cut(str(problem))})") from None
+        except RecursionError:
+            raise RigError(f"{path}: nested too deeply: not a rig description") from None
     else:
         try:
             raw = json.loads(text)
         except json.JSONDecodeError as exc:
             raise RigError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+        except RecursionError:
+            raise RigError(f"{path}: nested too deeply: not a rig description") from None
+        if _depth(raw) > MAX_RIG_DEPTH:
+            raise RigError(f"{path}: nested more than {MAX_RIG_DEPTH} levels deep: not a rig description")
     if not isinstance(raw, dict):
         raise RigError(f"{path}: a rig description is a mapping of keys (probes, keyphasor, units, ...)")
     return _build(raw, str(path))
+
+
+def _cut(text: str) -> str:
+    return text if len(text) <= 4 * SHOW_CHARS else text[: 4 * SHOW_CHARS] + "..."
+
+
+def _depth(x, level: int = 1) -> int:
+    if isinstance(x, dict):
+        return max((_depth(v, level + 1) for v in x.values()), default=level)
+    if isinstance(x, list):
+        return max((_depth(v, level + 1) for v in x), default=level)
+    return level
 
 
 def _number(where: str, key: str, value, *, allow_none: bool = False, positive: bool = False) -> float | None:
     """A finite number (``positive``: above zero); ``None`` passes with ``allow_none``."""
     if value is None and allow_none:
         return None
+    if isinstance(value, bool):  # YAML reads yes/no/true/false as booleans: never a number here
+        raise RigError(f"{where}: key {key!r}: {value!r} is a yes/no value, not a number")
+    if not isinstance(value, (int, float, str)):
+        raise RigError(f"{where}: key {key!r}: {_show(value)} is not a number")
     try:
         v = float(value)
-    except (TypeError, ValueError):
-        raise RigError(f"{where}: key {key!r}: {value!r} is not a number") from None
+    except (TypeError, ValueError, OverflowError):
+        raise RigError(f"{where}: key {key!r}: {_show(value)} is not a number (or beyond the float range)") from None
     if not math.isfinite(v) or (positive and v <= 0):
-        raise RigError(f"{where}: key {key!r}: {value!r} must be a {'positive' if positive else 'finite'} number")
+        raise RigError(f"{where}: key {key!r}: {_show(value)} must be a {'positive' if positive else 'finite'} "
+                       "number")
     return v
+
+
+def _name(where: str, key: str, value, *, allow_none: bool = False) -> str | None:
+    """A column name: text (a number is taken as its text); never a list, a mapping or yes/no."""
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (str, int)):
+        raise RigError(f"{where}: key {key!r}: {_show(value)} is not a column name")
+    name = str(value)
+    if not name.strip() or len(name) > 200:
+        raise RigError(f"{where}: key {key!r}: {_show(value)} is not a column name (empty or over 200 characters)")
+    return name
 
 
 def _positive(where: str, key: str, value, *, allow_none: bool = False) -> float | None:
@@ -166,8 +261,8 @@ def _in_range(where: str, key: str, value, lo: float, hi: float, says: str, *, b
 
 def _choice(where: str, key: str, value, options) -> str:
     """One of ``options`` (names)."""
-    if value not in options:
-        raise RigError(f"{where}: key {key!r}: {value!r} is not one of {', '.join(map(str, options))}")
+    if not isinstance(value, str) or value not in options:
+        raise RigError(f"{where}: key {key!r}: {_show(value)} is not one of {', '.join(map(str, options))}")
     return value
 
 
@@ -176,16 +271,16 @@ def _section(where: str, raw: dict, key: str, known: tuple[str, ...], hint: str 
     value = raw.get(key) or {}
     if not isinstance(value, dict):
         raise RigError(f"{where}: key {key!r} must be a mapping{hint}")
-    bad = sorted(set(value) - set(known))
+    bad = sorted(map(str, set(value) - set(known)))
     if bad:
-        raise RigError(f"{where}: unknown key(s) under {key!r}: {bad}")
+        raise RigError(f"{where}: unknown key(s) under {key!r}: {_show(bad)}")
     return value
 
 
 def _build(raw: dict, where: str) -> Rig:
-    unknown = sorted(set(raw) - _TOP_KEYS)
+    unknown = sorted(map(str, set(raw) - _TOP_KEYS))
     if unknown:
-        raise RigError(f"{where}: unknown key(s) {unknown}; known: {sorted(_TOP_KEYS)}")
+        raise RigError(f"{where}: unknown key(s) {_show(unknown)}; known: {sorted(_TOP_KEYS)}")
     unit_keys = ("time", "displacement", "speed", "sensitivity_mv_per_um")
     units = _section(where, raw, "units", unit_keys, f" ({', '.join(unit_keys)})")
     time_unit = _choice(where, "units.time", units.get("time", "s"), TIME_UNITS)
@@ -206,18 +301,21 @@ def _build(raw: dict, where: str) -> Rig:
         items = probes_raw
     else:
         raise RigError(f"{where}: key 'probes' must be a mapping name -> angle or a list of probes")
+    if not items:
+        raise RigError(f"{where}: key 'probes' is empty; an orbit needs an X-Y pair (e.g. probes: {{x: 45, y: -45}})")
     probes = []
     probe_z: dict[str, float] = {}  # axial positions given per probe
     for i, item in enumerate(items):
-        key = f"probes[{i}]" if isinstance(probes_raw, list) else f"probes.{item.get('name')}"
+        key = f"probes[{i}]" if isinstance(probes_raw, list) else f"probes.{str(item.get('name'))[:SHOW_CHARS]}"
         if not isinstance(item, dict) or "name" not in item or "angle_deg" not in item:
             raise RigError(f"{where}: key {key!r}: each probe needs 'name' and 'angle_deg'")
-        extra = sorted(set(item) - {"name", "angle_deg", "plane", "axial_position_m"})
+        extra = sorted(map(str, set(item) - {"name", "angle_deg", "plane", "axial_position_m"}))
         if extra:
-            raise RigError(f"{where}: key {key!r}: unknown key(s) {extra}")
+            raise RigError(f"{where}: key {key!r}: unknown key(s) {_show(extra)}")
         ang = _in_range(where, f"{key}.angle_deg", item["angle_deg"], -360.0, 360.0,
                         "{v:g} is not an angle in degrees (-360..360)")
-        probes.append(Probe(str(item["name"]), math.radians(ang), str(item.get("plane", "A"))))
+        probes.append(Probe(_name(where, f"{key}.name", item["name"]), math.radians(ang),
+                            _name(where, f"{key}.plane", item.get("plane", "A"))))
         if "axial_position_m" in item:
             z = _number(where, f"{key}.axial_position_m", item["axial_position_m"])
             z_plane = probe_z.setdefault(probes[-1].plane, z)
@@ -241,9 +339,18 @@ def _build(raw: dict, where: str) -> Rig:
             raise RigError(f"{where}: key 'probes' ({a.name}, {b.name}): mounting angles "
                            f"{math.degrees(a.angle):g} and {math.degrees(b.angle):g} deg are (nearly) collinear; "
                            "an X-Y pair is mounted 90 deg apart")
-        pos = planes_raw.get(pl, {}) if isinstance(planes_raw, dict) else {}
+        if not isinstance(planes_raw, dict):
+            raise RigError(f"{where}: key 'planes' must be a mapping plane -> {{axial_position_m: z}}")
+        pos = planes_raw.get(pl, {})
+        if not isinstance(pos, dict):
+            raise RigError(f"{where}: key 'planes.{pl}': {_show(pos)} is not a mapping "
+                           "(e.g. planes: {A: {axial_position_m: 0.0}})")
         planes[pl] = _number(where, f"planes.{pl}.axial_position_m",
                              pos.get("axial_position_m", probe_z.get(pl, 0.0)))
+    bad = sorted(map(str, set(planes_raw) - set(planes))) if isinstance(planes_raw, dict) else []
+    if bad:
+        raise RigError(f"{where}: key 'planes': plane(s) {_show(bad)} have no probe (the probes' planes: "
+                       f"{sorted(planes)})")
     model = raw.get("model", "auto")
     _choice(where, "model", model, ("auto", "translation", "tilt"))
     if model == "auto":
@@ -268,13 +375,21 @@ def _build(raw: dict, where: str) -> Rig:
     ip = _in_range(where, "disk", ip, 0.0, 1.0, "inertia ratio ip = {v:g} must be in [0, 1) for this model "
                    "(a disk with I_p >= I_t has no forward critical)", below_hi=True)
     mass = _positive(where, "disk.mass_kg", disk.get("mass_kg"), allow_none=True)
-    kp, sp = raw.get("keyphasor", None), raw.get("speed", None)
+    kp = _name(where, "keyphasor", raw.get("keyphasor", None), allow_none=True)
+    sp = _name(where, "speed", raw.get("speed", None), allow_none=True)
     if kp is None and sp is None:
         kp = "kp"
     if kp is not None and sp is not None:
         raise RigError(f"{where}: keys 'keyphasor' and 'speed': give one (the spin angle comes from either)")
+    time_col = _name(where, "time", raw.get("time", "t"))
+    # a probe mapped to the time or pulse column would read the clock as a displacement
+    for p in probes:
+        for key, column in (("time", time_col), ("keyphasor", kp), ("speed", sp)):
+            if column is not None and p.name == column:
+                raise RigError(f"{where}: key 'probes.{p.name}': the probe's column is also the {key} column "
+                               f"({column!r}); a probe reads its own column")
     return Rig(
-        probes=tuple(probes), keyphasor=kp, speed=sp, time=str(raw.get("time", "t")), time_unit=time_unit,
+        probes=tuple(probes), keyphasor=kp, speed=sp, time=time_col, time_unit=time_unit,
         displacement=disp, sensitivity_mv_per_um=sens, speed_unit=speed_unit,
         keyphasor_threshold=_number(where, "keyphasor_threshold", raw.get("keyphasor_threshold"), allow_none=True),
         planes=planes, model=model, ip=ip, mass_kg=mass,

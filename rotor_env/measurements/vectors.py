@@ -60,6 +60,24 @@ AMPLITUDE_UNITS: dict[str, float] = {"um": 1e-6, "µm": 1e-6, "mil": 25.4e-6, "m
 SPEED_UNITS: dict[str, float] = {"rpm": 2.0 * math.pi / 60.0, "rad/s": 1.0, "hz": 2.0 * math.pi}
 
 
+#: a speed beyond this is no rotor's (ultracentrifuges and dental turbines stay below)
+MAX_RPM = 1e6
+#: a 1X amplitude beyond this is beyond any displacement probe's range (metres)
+MAX_AMPLITUDE_M = 0.025
+#: a table whose run spans more revolutions than this is not one start-up (time in ms?);
+#: the transient model's grid is 48 samples a revolution
+MAX_REVOLUTIONS = 5e4
+
+
+def _num(x) -> str:
+    return repr(float(x))
+
+
+def _cut(x, chars: int = 200) -> str:
+    text = repr(x)
+    return text if len(text) <= chars else text[:chars] + "..."
+
+
 class VectorTableError(ValueError):
     """An order-tracked vector table that cannot be used as it is."""
 
@@ -381,9 +399,12 @@ def load_vector_table(
         data = data[:, keep]
     header = [h.strip() for h in header]
     lower = [h.lower() for h in header]
+    dup = sorted({h for h in lower if lower.count(h) > 1})
+    if dup:  # the last of two 'x_amp' columns would silently win
+        raise VectorTableError(f"{path}: column(s) {_cut(dup)} appear more than once")
     speed_col = next((c for c in ("rpm", "speed_rpm", "speed") if c in lower), None)
     if speed_col is None:
-        raise VectorTableError(f"{path}: no speed column: expected 'rpm' (found columns {header})")
+        raise VectorTableError(f"{path}: no speed column: expected 'rpm' (found columns {_cut(header)})")
     unit = "rpm" if speed_col != "speed" else speed_unit
     col = {h.lower(): i for i, h in enumerate(header)}
     probes: dict[str, dict[int, tuple[int, int]]] = {}
@@ -398,7 +419,7 @@ def load_vector_table(
                 probes.setdefault(name, {})[n] = (col[h], col[ph])
     if not probes:
         raise VectorTableError(f"{path}: no amplitude columns: expected 'amp' and 'phase_deg' "
-                               f"(or NAME_amp, NAME_phase_deg per probe); found {header}")
+                               f"(or NAME_amp, NAME_phase_deg per probe); found {_cut(header)}")
     if any(1 not in v for v in probes.values()):
         bad = next(k for k, v in probes.items() if 1 not in v)
         raise VectorTableError(f"{path}: probe {bad!r} has no 1X columns ({bad}_amp, {bad}_phase_deg)")
@@ -412,19 +433,46 @@ def load_vector_table(
         bad = ~np.isfinite(data[:, j])
         if bad.any():
             r = int(np.argmax(bad))
-            raise VectorTableError(f"{path}, line {lines[r]}, column {header[j]!r}: value {data[r, j]!r} is not finite")
+            raise VectorTableError(f"{path}, line {lines[r]}, column {header[j]!r}: value {_num(data[r, j])} is not "
+                                   "finite")
     speed = data[:, col[speed_col]] * SPEED_UNITS[unit]
     if (speed <= 0).any():
         r = int(np.argmax(speed <= 0))
         raise VectorTableError(f"{path}, line {lines[r]}, column {header[col[speed_col]]!r}: speed "
-                               f"{data[r, col[speed_col]]!r} is not positive")
+                               f"{_num(data[r, col[speed_col]])} is not positive")
+    rpm = speed / SPEED_UNITS["rpm"]
+    if (rpm > MAX_RPM).any():
+        r = int(np.argmax(rpm > MAX_RPM))
+        raise VectorTableError(f"{path}, line {lines[r]}, column {header[col[speed_col]]!r}: speed "
+                               f"{_num(data[r, col[speed_col]])} ({rpm[r]:.4g} rpm) is beyond any rotor's "
+                               f"({MAX_RPM:g} rpm): not a speed in {unit}")
+    if float(rpm.max() - rpm.min()) <= 1e-9 * float(rpm.max()):
+        raise VectorTableError(f"{path}, column {header[col[speed_col]]!r}: the speed is {_num(rpm[0])} rpm on every "
+                               "row; a run-up or coast-down (changing speed) is needed to see a resonance")
+    metres = AMPLITUDE_UNITS[amp_unit]
+    notes: list[str] = []
     for v in probes.values():
         amp = data[:, v[1][0]]
         if (amp < 0).any():
             r = int(np.argmax(amp < 0))
-            raise VectorTableError(f"{path}, line {lines[r]}, column {header[v[1][0]]!r}: amplitude {amp[r]!r} "
+            raise VectorTableError(f"{path}, line {lines[r]}, column {header[v[1][0]]!r}: amplitude {_num(amp[r])} "
                                    "is negative")
-    notes: list[str] = []
+        # a vibration beyond any displacement probe's range: another unit, or no measurement
+        big = amp * metres > MAX_AMPLITUDE_M
+        if big.any():
+            r = int(np.argmax(big))
+            raise VectorTableError(f"{path}, line {lines[r]}, column {header[v[1][0]]!r}: amplitude {_num(amp[r])} "
+                                   f"{amp_unit} is beyond a displacement probe's range ({MAX_AMPLITUDE_M * 1e3:g} mm): "
+                                   "is --amp-unit right?")
+    amps = data[:, [pair[0] for v in probes.values() for pair in v.values()]]
+    if not (amps > 0).any():
+        raise VectorTableError(f"{path}: every amplitude is zero: the table holds no vibration to diagnose")
+    phases = data[:, [pair[1] for v in probes.values() for pair in v.values()]]
+    if np.all(np.abs(phases) <= 2 * math.pi + 1e-9) and float(np.ptp(phases)) > 1.0:
+        # degrees that never leave ±6.3 over a run (and across probes mounted apart) are radians
+        raise VectorTableError(f"{path}, column {header[next(pair[1] for v in probes.values() for pair in v.values())]!r}: "
+                               f"every phase lies within ±{2 * math.pi:.4g} (from {_num(phases.min())} to "
+                               f"{_num(phases.max())}): radians? Give the phases in degrees")
     t = None
     if t_idx is not None and labels is not None:
         t = data[:, t_idx].astype(float)  # each run its own clock: no order across runs
@@ -433,9 +481,19 @@ def load_vector_table(
         step = np.diff(t)
         if (step <= 0).any():
             r = int(np.argmax(step <= 0)) + 1
-            raise VectorTableError(f"{path}, line {lines[r]}, column {header[t_idx]!r}: time {t[r]!r} does not "
-                                   f"increase (previous {t[r - 1]!r})")
-    elif labels is None:
+            raise VectorTableError(f"{path}, line {lines[r]}, column {header[t_idx]!r}: time {_num(t[r])} does not "
+                                   f"increase (previous {_num(t[r - 1])})")
+        revs = float(np.sum(0.5 * (speed[1:] + speed[:-1]) * step)) / (2 * math.pi)
+        if revs < 0.5 * (len(t) - 1):
+            raise VectorTableError(f"{path}, column {header[t_idx]!r}: the run lasts {revs:.3g} revolutions "
+                                   f"(t {_num(t[0])} to {_num(t[-1])} s at {rpm.min():.4g}-{rpm.max():.4g} rpm) for "
+                                   f"{len(t)} rows, each tracked over at least one revolution: is the time in seconds "
+                                   "(not ms or µs)?")
+        if revs > MAX_REVOLUTIONS:
+            raise VectorTableError(f"{path}, column {header[t_idx]!r}: the run would last {revs:.4g} revolutions "
+                                   f"(t {_num(t[0])} to {_num(t[-1])} s at {rpm.min():.4g}-{rpm.max():.4g} rpm), beyond "
+                                   f"{MAX_REVOLUTIONS:g}: is the time in seconds (not ms or µs)?")
+    else:
         notes.append("no time column: the synchronous response is taken as quasi-steady")
         if not (np.all(np.diff(speed) > 0) or np.all(np.diff(speed) < 0)):
             # quasi-steady rows stand on their own: order them by speed (the noise floor and
@@ -475,7 +533,7 @@ def load_vector_table(
 
 
 def _text_column(path: Path, name: str) -> tuple[list[str], dict[int, str]]:
-    """The header and one column read as text: file line (as :func:`~rotor_env.io.read_table`
+    """The header and one column read as text: file line (as :func:`~rotor_env.measurements.files.read_table`
     numbers them) -> the cell, stripped.  A number is its text (``1`` stays ``1``)."""
     if path.suffix == ".parquet":
         try:

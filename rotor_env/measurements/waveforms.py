@@ -99,6 +99,13 @@ class RigRecord:
             if len(full) < 2:
                 raise WaveformError(f"{self.source}: slow_roll_rpm {below_rpm:g}: fewer than two revolutions below "
                                     f"it (the slowest is {self.rpm.min():.0f} rpm)")
+            top = float(self.rpm.max())
+            if below_rpm > MAX_SLOW_ROLL_SHARE * top:
+                # a "slow roll" over most of the run subtracts the vibration itself (a crack's 1X/2X
+                # then reads as a bow): slow roll is well below the run's speeds and its criticals
+                raise WaveformError(f"{self.source}: slow_roll_rpm {below_rpm:g} is above {MAX_SLOW_ROLL_SHARE:.0%} of "
+                                    f"the run's top speed ({top:.0f} rpm): the slow-roll revolutions would be most of "
+                                    "the run; give the speed below which the shaft only shows its runout")
             bins = 64
             idx = ((self.phi % (2 * math.pi)) / (2 * math.pi) * bins).astype(int) % bins
             for n, x in self.readings.items():
@@ -154,6 +161,15 @@ class RigRecord:
                                         f"every {q} samples)")
 
 
+#: a probe reading beyond this (metres) is beyond any displacement probe's range
+MAX_PROBE_M = 0.025
+#: a run-up whose top speed is outside these (rpm) has its time in another unit
+MIN_TOP_RPM = 30.0
+MAX_RPM = 1e6
+#: slow roll is a small part of the run: above this share of the top speed it is the run itself
+MAX_SLOW_ROLL_SHARE = 0.5
+
+
 def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
     """Read a waveform file (CSV or Parquet) as the rig describes it."""
     from .files import MeasurementError, read_table
@@ -176,12 +192,21 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
         bad = ~np.isfinite(x)
         if bad.any():
             r = int(np.argmax(bad))
-            raise WaveformError(f"{path}, line {lines[r]}, column {c!r}: value {x[r]!r} is not finite")
+            raise WaveformError(f"{path}, line {lines[r]}, column {c!r}: value {float(x[r])!r} is not finite")
+    for p in rig.probes:
+        # a reading beyond any displacement probe's range: another unit, or no measurement
+        metres = np.abs(rig.to_metres(data[:, col[p.name]]))
+        big = metres > MAX_PROBE_M
+        if big.any():
+            r = int(np.argmax(big))
+            raise WaveformError(f"{path}, line {lines[r]}, column {p.name!r}: reading {float(data[r, col[p.name]])!r} "
+                                f"{rig.displacement} is beyond a displacement probe's range ({MAX_PROBE_M * 1e3:g} mm): "
+                                f"is units.displacement ({rig.displacement}) in {rig.source} right?")
     t = data[:, col[rig.time]] * TIME_UNITS[rig.time_unit]
     step = np.diff(t)
     if (step <= 0).any():
         r = int(np.argmax(step <= 0)) + 1
-        raise WaveformError(f"{path}, line {lines[r]}, column {rig.time!r}: time {t[r]!r} does not increase")
+        raise WaveformError(f"{path}, line {lines[r]}, column {rig.time!r}: time {float(t[r])!r} does not increase")
     dt = float(np.median(step))
     if np.any(np.abs(step - dt) > 1e-3 * dt):
         r = int(np.argmax(np.abs(step - dt) > 1e-3 * dt)) + 1
@@ -204,6 +229,11 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
         phi = np.concatenate(([0.0], np.cumsum(0.5 * (speed_all[1:] + speed_all[:-1]) * step)))
         speed = speed_all
         accel = np.gradient(speed_all, t)
+    top = float(np.max(np.abs(speed))) / (2 * np.pi) * 60.0 if len(speed) else 0.0
+    if not MIN_TOP_RPM <= top <= MAX_RPM:
+        raise WaveformError(f"{path}: the shaft's top speed would be {top:.4g} rpm (time in {rig.time_unit}, column "
+                            f"{rig.time!r}), outside any rotor's run-up ({MIN_TOP_RPM:g} to {MAX_RPM:g} rpm): is "
+                            f"units.time in {rig.source} right (ms or µs read as s)?")
     readings = {}
     for p in rig.probes:
         x = data[inside, col[p.name]]

@@ -36,9 +36,9 @@ def add_monitor_parser(sub) -> None:
                      help="forgetting factor per sample (default 0.9995: a memory of 2000 samples)")
     mem.add_argument("--window", type=float, metavar="T", help="a sliding window of T time units (with --rig: "
                      "seconds) instead")
-    p.add_argument("--arl0", type=float, default=1e7, metavar="N",
+    p.add_argument("--arl0", type=float, default=None, metavar="N",
                    help="target in-control average run length, samples between false alarms (default 1e7)")
-    p.add_argument("--block", type=int, default=200, metavar="N", help="samples per block of evidence (default 200)")
+    p.add_argument("--block", type=int, default=None, metavar="N", help="samples per block of evidence (default 200)")
     p.add_argument("--status-every", type=float, metavar="T",
                    help="a status line every T time units (default 10; with --rig: seconds, default 1; 0: none)")
     p.add_argument("--follow", action="store_true", help="wait for rows appended to FILE (like tail -f)")
@@ -62,8 +62,9 @@ def _config(args, dt: float, *, ip: float = 0.3, time_scale: float = 1.0):
     from .core import MonitorConfig
 
     every = args.status_every if args.status_every is not None else (1.0 if args.rig else 10.0)
-    opts: dict = {"ip": args.ip if args.ip is not None else ip, "arl0": args.arl0, "block": args.block,
-                  "status_every": every * time_scale or None}
+    block = args.block if args.block is not None else 200
+    opts: dict = {"ip": args.ip if args.ip is not None else ip, "arl0": args.arl0 if args.arl0 is not None else 1e7,
+                  "block": block, "status_every": every * time_scale or None}
     if args.model:
         names = [m.strip() for m in args.model.split(",") if m.strip()]
         for n in names:
@@ -72,7 +73,7 @@ def _config(args, dt: float, *, ip: float = 0.3, time_scale: float = 1.0):
     if args.forgetting is not None:
         opts["forgetting"] = args.forgetting
     if args.window is not None:
-        opts["window"] = max(args.block, int(round(args.window * time_scale / dt)))
+        opts["window"] = max(block, int(round(args.window * time_scale / dt)))
     return MonitorConfig(**opts)
 
 
@@ -104,7 +105,17 @@ def run_monitor(args: argparse.Namespace) -> int:
     if args.report:
         check_writable(args.report, overwrite=args.force)
     if args.state:
+        if not str(args.state).endswith(".npz"):
+            raise ValueError(f"--state {args.state}: state files end in .npz")
         check_writable(args.state, overwrite=args.force)
+    if args.resume:
+        # the saved state carries its model and detector: options that would change them are refused,
+        # never silently ignored
+        given = [o for o, v in (("--model", args.model), ("--ip", args.ip), ("--forgetting", args.forgetting),
+                                ("--window", args.window), ("--arl0", args.arl0), ("--block", args.block)) if v is not None]
+        if given:
+            raise ValueError(f"--resume continues the saved monitor with its own settings; {', '.join(given)} cannot "
+                             "change them (start a new monitor without --resume to use them)")
     live = None
     if not args.json_lines:
         from .live import LiveView
@@ -118,7 +129,9 @@ def run_monitor(args: argparse.Namespace) -> int:
         if live is not None:
             live.show(event)
         else:
-            print(json.dumps(event), flush=True)
+            # one write per line: an interrupt never leaves half a line for the summary to glue onto
+            sys.stdout.write(json.dumps(event) + "\n")
+            sys.stdout.flush()
 
     reader, ip, scale = open_stream(args.file, rig=rig, natural_rpm=args.natural_rpm, follow=args.follow,
                                     idle_exit=args.idle_exit)
@@ -136,9 +149,10 @@ def run_monitor(args: argparse.Namespace) -> int:
     except MeasurementError as exc:
         # the rows before the bad line were processed: the monitor keeps that state
         print(f"rotor-id monitor: error: {exc}", file=sys.stderr)
-        if monitor is not None:
-            line = getattr(reader, "error_line", None) or reader.line + 1
-            emit({"event": "error", "message": str(exc), "line": line, "samples": monitor.samples})
+        if monitor is None:  # a bad line before any good row: an error event and a summary all the same
+            monitor = Monitor(_config(args, 0.01, ip=ip, time_scale=scale))
+        line = getattr(exc, "line", None) or getattr(reader, "error_line", None) or reader.line + 1
+        emit({"event": "error", "message": str(exc), "line": line, "samples": monitor.samples})
         status = 2
     except KeyboardInterrupt:
         status = 130
@@ -146,6 +160,8 @@ def run_monitor(args: argparse.Namespace) -> int:
         if live is not None:
             live.stop()
     if monitor is None:
+        if status == 0:
+            print(f"rotor-id monitor: error: {reader.name}: the stream has a header but no data rows", file=sys.stderr)
         return status or 2
     summary = monitor.summary()
     if getattr(reader, "clock", None) is not None:

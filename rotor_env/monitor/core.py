@@ -407,14 +407,17 @@ class Monitor:
             with np.load(path, allow_pickle=False) as npz:
                 meta = json.loads(str(npz["meta"]))
                 arrays = {k: np.array(npz[k]) for k in npz.files if k != "meta"}
-        except (OSError, KeyError, ValueError, TypeError, EOFError) as exc:
-            raise ValueError(f"{path}: not a monitor state file ({exc})") from None
+        except Exception as exc:  # a truncated or altered file: zip, zlib or format errors of any kind
+            raise ValueError(f"{path}: not a monitor state file ({type(exc).__name__}: {str(exc)[:200]})") from None
         if not isinstance(meta, dict) or meta.get("version") != _STATE_VERSION:
             raise ValueError(f"{path}: unsupported monitor state version")
         known = {f.name for f in fields(MonitorConfig)}
         config = {k: v for k, v in meta.get("config", {}).items() if k in known}
         config["effects"] = tuple(config.get("effects", DEFAULT_EFFECTS))
-        mon = cls(MonitorConfig(**config))
+        try:
+            mon = cls(MonitorConfig(**config))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: the monitor state's configuration is not valid ({str(exc)[:200]})") from None
         for name, ref in mon._arrays.items():
             got = arrays.get(name)
             if got is None or (name != "pending" and got.shape != ref.shape) or got.dtype.kind != "f":

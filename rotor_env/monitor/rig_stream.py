@@ -55,7 +55,7 @@ from ..measurements.files import UNIFORM_RTOL, MeasurementError
 from ..measurements.keyphasor import KeyphasorError, KeyphasorTracker
 from ..measurements.probes import probe_matrix
 from ..measurements.rig import SPEED_UNITS, TIME_UNITS, Rig
-from ..measurements.waveforms import LENGTH_UNIT, TARGET_DT
+from ..measurements.waveforms import LENGTH_UNIT, MAX_PROBE_M, TARGET_DT
 from .stream import CHUNK_BYTES, SlidingDerivatives, StreamReader
 
 __all__ = ["DC_GAP_REVOLUTIONS", "RigClock", "RigStream", "natural_rpm_required"]
@@ -378,6 +378,14 @@ class RigStream:
             first_bad = int(r)
             error = self._fail(lines[r], f"{self.name}, line {lines[r]}, column {self.needed[c]!r}: value "
                                          f"{float(sub[r, c])!r} is not finite")
+        probes = np.abs(self.rig.to_metres(sub[:first_bad, 2:]))
+        big = probes > MAX_PROBE_M
+        if big.any():
+            r, c = np.argwhere(big)[0]
+            first_bad = int(r)
+            error = self._fail(lines[r], f"{self.name}, line {lines[r]}, column {self.needed[2 + c]!r}: reading "
+                                         f"{float(sub[r, 2 + c])!r} {self.rig.displacement} is beyond a displacement "
+                                         f"probe's range ({MAX_PROBE_M * 1e3:g} mm)")
         t = data[:first_bad, self._cols[0]] * TIME_UNITS[self.rig.time_unit]
         tt = t if math.isnan(self._last_t) else np.concatenate([[self._last_t], t])
         shift = 0 if math.isnan(self._last_t) else 1

@@ -38,6 +38,8 @@ from ..measurements.files import DERIVABLE, MAX_TILT, REQUIRED, UNIFORM_RTOL, Me
 __all__ = ["StreamReader", "iter_chunks", "read_ahead"]
 
 CHUNK_BYTES = 1 << 20
+#: a row of the stream longer than this is refused (its columns are a few numbers)
+MAX_LINE_BYTES = 1 << 16
 
 
 class StreamReader:
@@ -76,6 +78,7 @@ class StreamReader:
             self._fh = source
             self._path = None
         self.line = 1
+        self.error_line: int | None = None
         self._last_t = math.nan
         self._dt = 0.0
         self._phi_offset = 0.0
@@ -140,13 +143,29 @@ class StreamReader:
                 return
             time.sleep(self.poll)
 
+    def _lines(self, fh: BinaryIO) -> Iterator[bytes]:
+        """The stream's bytes with every line ending as ``\n`` (CR-only and CRLF files too)."""
+        held = b""
+        for data in self._more(fh):
+            data = held + data
+            held = b""
+            if data.endswith(b"\r"):  # a CRLF may be split between two reads
+                data, held = data[:-1], b"\r"
+            if b"\r" in data:
+                data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+            if data:
+                yield data
+        if held:
+            yield b"\n"
+
     def _csv(self, fh: BinaryIO) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         rest = b""
         header: list[str] | None = None
-        for data in self._more(fh):
+        for data in self._lines(fh):
             rest += data
             cut = rest.rfind(b"\n")
             if cut < 0:
+                self._check_line_length(rest)
                 continue
             block, rest = rest[: cut + 1], rest[cut + 1 :]
             if header is None:
@@ -154,8 +173,18 @@ class StreamReader:
                 header = self._header(block[:first])
                 block = block[first + 1 :]
                 self.line = 1
+            if len(block) > MAX_LINE_BYTES:
+                # a complete line too long: the rows before it go out first, then the error
+                sizes = [len(x) for x in block.split(b"\n")]
+                long = next((i for i, n in enumerate(sizes) if n > MAX_LINE_BYTES), None)
+                if long is not None:
+                    good = b"".join(x + b"\n" for x in block.split(b"\n")[:long])
+                    if good:
+                        yield from self._parsed(good, header)
+                    self._check_line_length(b"x" * sizes[long])
             if block:
                 yield from self._parsed(block, header)
+            self._check_line_length(rest)
         if rest.strip():
             if header is None:
                 header = self._header(rest)
@@ -163,6 +192,16 @@ class StreamReader:
                 yield from self._parsed(rest + b"\n", header)
         if header is None:
             raise MeasurementError(f"{self.name}: the stream is empty (expected a header line)")
+
+    def _check_line_length(self, rest: bytes) -> None:
+        """A line longer than :data:`MAX_LINE_BYTES` is no measurement row (and is not
+        held whole in memory)."""
+        if len(rest) > MAX_LINE_BYTES:
+            line = self.line + 1
+            exc = MeasurementError(f"{self.name}, line {line}: longer than {MAX_LINE_BYTES // 1000} kB: not a row of "
+                                   "numbers")
+            exc.line = line
+            raise exc
 
     def _parsed(self, block: bytes, header: list[str]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """The rows of a block of lines; at a bad line, the rows before it first, then the error."""
@@ -176,6 +215,8 @@ class StreamReader:
         yield parsed
 
     def _header(self, raw: bytes) -> list[str]:
+        if len(raw) > MAX_LINE_BYTES:
+            raise MeasurementError(f"{self.name}, line 1: the header is longer than {MAX_LINE_BYTES // 1000} kB")
         text = raw.decode("utf-8-sig", errors="replace").strip()
         header = [h.strip() for h in next(csv.reader([text]))] if text else []
         dup = {h for h in header if header.count(h) > 1}
@@ -184,9 +225,9 @@ class StreamReader:
         missing = [c for c in self.required if c not in header]
         if missing and self.missing_hint is not None:
             raise MeasurementError(f"{self.name}: column(s) {missing} {self.missing_hint} are not in the stream "
-                                   f"(its header has {header})")
+                                   f"(its header has {str(header)[:300]})")
         if missing:
-            raise MeasurementError(f"{self.name}: missing required column(s) {missing}; the header has {header}; "
+            raise MeasurementError(f"{self.name}: missing required column(s) {missing}; the header has {str(header)[:300]}; "
                                    f"required: {list(REQUIRED)}, optional: {list(DERIVABLE)}")
         self._header_names = header
         return header
@@ -223,11 +264,19 @@ class StreamReader:
             line_no = first_line + i
             if not raw.strip():
                 continue
-            cells = next(csv.reader([raw]))
+            try:
+                cells = next(csv.reader([raw]))
+            except csv.Error as err:
+                self._partial = (np.array(rows, dtype=float).reshape(-1, len(header)), np.array(lines, dtype=np.int64))
+                exc = MeasurementError(f"{self.name}, line {line_no}: not a CSV row ({err})")
+                exc.line = self.error_line = line_no
+                raise exc from None
             if len(cells) != len(header):
                 self._partial = (np.array(rows, dtype=float).reshape(-1, len(header)), np.array(lines, dtype=np.int64))
-                raise MeasurementError(f"{self.name}, line {line_no}: {len(cells)} fields, but the header has "
+                exc = MeasurementError(f"{self.name}, line {line_no}: {len(cells)} fields, but the header has "
                                        f"{len(header)}")
+                exc.line = self.error_line = line_no
+                raise exc
             vals = []
             for name, cell in zip(header, cells, strict=True):
                 try:
@@ -235,8 +284,12 @@ class StreamReader:
                 except ValueError:
                     self._partial = (np.array(rows, dtype=float).reshape(-1, len(header)),
                                      np.array(lines, dtype=np.int64))
-                    raise MeasurementError(f"{self.name}, line {line_no}, column {name!r}: {cell.strip()!r} is "
-                                           "not a number") from None
+                    shown = cell.strip()
+                    shown = shown if len(shown) <= 40 else shown[:40] + "..."
+                    exc = MeasurementError(f"{self.name}, line {line_no}, column {name!r}: {shown!r} is "
+                                           "not a number")
+                    exc.line = self.error_line = line_no
+                    raise exc from None
             rows.append(vals)
             lines.append(line_no)
         return np.array(rows, dtype=float).reshape(-1, len(header)), np.array(lines, dtype=np.int64)
@@ -271,7 +324,15 @@ class StreamReader:
                     yield out
             return
         data, lines = parsed
-        out = self._validate(data, lines)
+        try:
+            out = self._validate(data, lines)
+        except MeasurementError as exc:
+            # the rows before the bad one are good: they go out first (an alarm they raise is kept)
+            row = getattr(exc, "row", 0)
+            if row:
+                yield from self._emit((data[:row], lines[:row]))
+            self.error_line = exc.line = int(lines[row]) if row < len(lines) else None
+            raise
         if out is None:
             return
         if self._deriv is not None:
@@ -281,6 +342,12 @@ class StreamReader:
             yield out
 
     def _validate(self, data: np.ndarray, lines: np.ndarray) -> np.ndarray | None:
+        """The rows as the ten model columns; a bad row raises with its index as ``row``."""
+        def fail(message: str, row: int):
+            exc = MeasurementError(message)
+            exc.row = row
+            return exc
+
         header = self._header_names
         if data.shape[0] == 0:
             return None
@@ -291,8 +358,7 @@ class StreamReader:
                 bad = ~np.isfinite(col)
                 if bad.any():
                     r = int(np.argmax(bad))
-                    raise MeasurementError(f"{self.name}, line {lines[r]}, column {c!r}: value {float(col[r])!r} is not "
-                                           "finite")
+                    raise fail(f"{self.name}, line {lines[r]}, column {c!r}: value {float(col[r])!r} is not finite", r)
         t = data[:, idx["t"]]
         tt = t if math.isnan(self._last_t) else np.concatenate([[self._last_t], t])
         step = np.diff(tt)
@@ -300,22 +366,22 @@ class StreamReader:
         if step.size:
             if (step <= 0).any():
                 r = int(np.argmax(step <= 0))
-                raise MeasurementError(f"{self.name}, line {lines[r + 1 - shift]}, column 't': time {float(tt[r + 1])!r} "
-                                       f"does not increase (previous {float(tt[r])!r})")
+                raise fail(f"{self.name}, line {lines[r + 1 - shift]}, column 't': time {float(tt[r + 1])!r} "
+                           f"does not increase (previous {float(tt[r])!r})", r + 1 - shift)
             if self._dt == 0.0:
                 self._dt = float(step[0])
             off = np.abs(step - self._dt) > UNIFORM_RTOL * self._dt
             if off.any():
                 r = int(np.argmax(off))
-                raise MeasurementError(f"{self.name}, line {lines[r + 1 - shift]}, column 't': non-uniform "
-                                       f"sampling: step {float(step[r])!r} where the stream's step is {self._dt!r}")
+                raise fail(f"{self.name}, line {lines[r + 1 - shift]}, column 't': non-uniform "
+                           f"sampling: step {float(step[r])!r} where the stream's step is {self._dt!r}", r + 1 - shift)
         for c in ("theta_x", "theta_y"):
             col = data[:, idx[c]]
             big = np.abs(col) > MAX_TILT
             if big.any():
                 r = int(np.argmax(big))
-                raise MeasurementError(f"{self.name}, line {lines[r]}, column {c!r}: value {float(col[r])!r} is beyond "
-                                       f"{MAX_TILT:g} rad, not a shaft's tilt: degrees? (inclinations are in radians)")
+                raise fail(f"{self.name}, line {lines[r]}, column {c!r}: value {float(col[r])!r} is beyond "
+                           f"{MAX_TILT:g} rad, not a shaft's tilt: degrees? (inclinations are in radians)", r)
         out = np.zeros((data.shape[0], len(COLUMNS)))
         for j, c in enumerate(COLUMNS):
             if c in idx:
@@ -330,6 +396,7 @@ class StreamReader:
         """An encoder's angle wrapped to one turn, unwrapped across chunks; degrees refused."""
         raw = phi if math.isnan(self._phi_last) else np.concatenate([[self._phi_last], phi])
         jumps = np.abs(np.diff(raw)) > math.pi
+        seen = (self._phi_min, self._phi_max)  # restored on an error: the good rows are validated again
         self._phi_min = min(self._phi_min, float(phi.min()))
         self._phi_max = max(self._phi_max, float(phi.max()))
         out = phi + self._phi_offset
@@ -339,8 +406,11 @@ class StreamReader:
             if self._phi_max - self._phi_min > 2 * math.pi + 1e-6:
                 unit = " (wrapped to 360: degrees; convert to radians)" if self._phi_max - self._phi_min <= 360.0 + 1e-6 \
                     else " (more than half a turn between samples: aliased or not in radians)"
-                raise MeasurementError(f"{self.name}, line {lines[r + 1 - shift]}, column 'phi': jumps from "
+                exc = MeasurementError(f"{self.name}, line {lines[r + 1 - shift]}, column 'phi': jumps from "
                                        f"{float(raw[r])!r} to {float(raw[r + 1])!r}{unit}")
+                exc.row = r + 1 - shift
+                self._phi_min, self._phi_max = seen
+                raise exc
             steps = np.diff(raw)
             wraps = np.where(np.abs(steps) > math.pi, -2 * math.pi * np.round(steps / (2 * math.pi)), 0.0)
             out = phi + self._phi_offset + np.cumsum(wraps)[len(wraps) - len(phi):]

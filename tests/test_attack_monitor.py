@@ -1,0 +1,123 @@
+"""Issue 22, items 4, 5 and 8 (the monitor): a bad line never takes the alarm raised before
+it, the error names the right line, CR-only files and damaged state files are handled,
+and options --resume would ignore are refused."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rotor_env.measurements.files import MeasurementError
+from rotor_env.monitor import Monitor, StreamReader
+from rotor_env.monitor.scenarios import with_crack
+
+
+@pytest.fixture(scope="module")
+def crack_file(tmp_path_factory):
+    """The issue-15 example: D 0.03 -> 0.04 at t = 250 (noise-free), alarm at t 250-256."""
+    meas = with_crack(0.03, 0.04, rotor="table1")
+    path = tmp_path_factory.mktemp("mon") / "run.csv"
+    type(meas)(meas.data, None).to_file(path)
+    return path
+
+
+def _run(path, **reader):
+    """Monitor the file in one read block; returns (monitor, the error or None)."""
+    mon = Monitor()
+    try:
+        for chunk in StreamReader(path, **reader):
+            list(mon.update(chunk))
+    except MeasurementError as exc:
+        return mon, exc
+    return mon, None
+
+
+@pytest.mark.parametrize("bad", ["nan", "backwards", "duplicate", "tilt"])
+def test_a_bad_line_after_the_alarm_keeps_the_alarm_and_names_its_line(tmp_path, crack_file, bad):
+    lines = crack_file.read_text().splitlines(keepends=True)
+    k = 13501  # t = 270 (dt 0.02): after the alarm, in the same read block
+    cells = lines[k].rstrip("\n").split(",")
+    if bad == "nan":
+        cells[2] = "nan"
+    elif bad == "backwards":
+        cells[0] = repr(float(cells[0]) - 1.0)
+    elif bad == "duplicate":
+        cells[0] = lines[k - 1].split(",")[0]
+    else:
+        cells[4] = "1.5"  # theta_x
+    lines[k] = ",".join(cells) + "\n"
+    path = tmp_path / "bad.csv"
+    path.write_text("".join(lines))
+    mon, exc = _run(path, chunk_bytes=1 << 26)
+    assert exc is not None and f"line {k + 1}," in str(exc)
+    assert getattr(exc, "line", None) == k + 1
+    assert mon.samples == k - 1  # every row before the bad one
+    assert mon.summary()["alarms"] == 1
+
+
+def test_cr_only_line_endings_read_like_lf(tmp_path, crack_file):
+    text = crack_file.read_text()
+    head = "".join(text.splitlines(keepends=True)[:3001])
+    lf, cr = tmp_path / "lf.csv", tmp_path / "cr.csv"
+    lf.write_text(head)
+    cr.write_bytes(head.replace("\n", "\r").encode())
+    a = np.concatenate(list(StreamReader(lf)))
+    b = np.concatenate(list(StreamReader(cr, chunk_bytes=4096)))  # a CRLF split between reads too
+    np.testing.assert_array_equal(a, b)
+
+
+def test_a_huge_line_is_refused_with_its_number(tmp_path, crack_file):
+    lines = crack_file.read_text().splitlines(keepends=True)[:2001]
+    lines.insert(1001, "1" * (1 << 20) + "\n")
+    path = tmp_path / "long.csv"
+    path.write_text("".join(lines))
+    mon, exc = _run(path)
+    assert exc is not None and "line 1002: longer than" in str(exc)
+    assert mon.samples == 1000
+
+
+@pytest.mark.parametrize("damage", ["truncate", "flip"])
+def test_a_damaged_state_file_is_a_clear_error(tmp_path, damage):
+    mon = Monitor()
+    path = mon.save(tmp_path / "state.npz")
+    data = bytearray(path.read_bytes())
+    if damage == "truncate":
+        data = data[: len(data) // 2]
+    else:
+        for i in range(40, len(data), 97):
+            data[i] ^= 0x5A
+    path.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match=r"not a monitor state file|not valid|missing|non-finite|version"):
+        Monitor.load(path)
+
+
+def _cli(args, **kw):
+    return subprocess.run([sys.executable, "-m", "rotor_env.cli", "monitor", *args], capture_output=True,
+                          text=True, timeout=120, **kw)
+
+
+def test_cli_header_only_bad_state_name_and_resume_options(tmp_path, crack_file):
+    header = crack_file.read_text().splitlines()[0] + "\n"
+    out = _cli(["-", "--json-lines"], input=header)
+    assert out.returncode == 2 and "no data rows" in out.stderr
+    out = _cli([str(crack_file), "--json-lines", "--state", str(tmp_path / "x.txt")])
+    assert out.returncode == 2 and ".npz" in out.stderr and out.stdout == ""  # said before reading the stream
+    state = Monitor().save(tmp_path / "s.npz")
+    out = _cli([str(crack_file), "--resume", str(state), "--arl0", "1000", "--model", "unbalance"])
+    assert out.returncode == 2 and "--model, --arl0" in out.stderr
+
+
+def test_cli_bad_line_in_the_first_block_gives_an_error_event_and_a_summary(tmp_path, crack_file):
+    lines = crack_file.read_text().splitlines(keepends=True)[:200]
+    lines[3] = "1,2,oops,4,5,6,7,8,9,10\n"
+    path = tmp_path / "bad.csv"
+    path.write_text("".join(lines))
+    out = _cli([str(path), "--json-lines"])
+    assert out.returncode == 2
+    ev = [json.loads(x) for x in out.stdout.splitlines()]
+    assert ev[-2]["event"] == "error" and ev[-2]["line"] == 4
+    assert ev[-1]["event"] == "summary"
