@@ -452,7 +452,8 @@ class OutputErrorFit:
 
     @property
     def n_rows(self) -> int:
-        return int(self.residual.size)
+        """Rows fitted: two channels of every sample in a segment."""
+        return int(2 * sum(i1 - i0 + 1 for i0, i1 in self.grid.segments))
 
     @property
     def rms(self) -> float:
@@ -517,14 +518,19 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset):
     then the segment's start state."""
     npar = len(pidx) + len(qidx)
     nf = npar + N_OFFSETS + 4
-    pred = np.empty((grid.n, 2))
-    jac = np.empty((grid.n, 2, nf))
+    # rows outside the segments (a fit on a subset of them) predict the measurement itself:
+    # no residual, no gradient
+    pred = grid.y.copy()
+    jac = np.zeros((grid.n, 2, nf))
     # the kernel leaves the offsets' columns at zero (no state depends on them)
     status = kernel.module.shoot(grid.t, grid.phi, grid.phid, grid.segments, x0, theta, arg, active,
                                  pidx, qidx, qlo, qhi, grid.ip, grid.substeps, pred, jac)
-    pred += offset
-    jac[:, 0, npar] = 1.0
-    jac[:, 1, npar + 1] = 1.0
+    inside = np.zeros(grid.n, dtype=bool)
+    for i0, i1 in grid.segments:
+        inside[i0:i1 + 1] = True
+    pred[inside] += offset
+    jac[inside, 0, npar] = 1.0
+    jac[inside, 1, npar + 1] = 1.0
     return status, pred, jac
 
 
@@ -704,7 +710,8 @@ def fit_output_error(
     # the covariance at the optimum: projected Jacobian, HAC of the per-sample scores
     rt, Jt, _ = _project(grid, r, jac, npq)
     bread = np.linalg.pinv(Jt.T @ Jt)
-    scores = (Jt * rt[:, None]).reshape(grid.n, 2, npq).sum(axis=1)
+    # the scores per time sample of the segments' rows (two channels each), in time order
+    scores = (Jt * rt[:, None]).reshape(-1, 2, npq).sum(axis=1)
     bw = andrews_bandwidth(scores)
     S = long_run_covariance(scores, bw)
     cov = bread @ S @ bread
