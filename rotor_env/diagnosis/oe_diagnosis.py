@@ -440,6 +440,16 @@ def diagnose_output_error(
 
         # a crack must beat the rub and hold at every amplitude
         accepted = sorted((r for r in round_rows if r.accepted), key=bic)
+        # an open crack is a breathing crack that does not breathe: when the breathing depth's
+        # interval reaches zero and the open crack fits, the open crack (fewer parameters) is named
+        names = [r.effect for r in accepted]
+        if names and names[0] == "breathing_crack" and "asymmetry" in fits:
+            depth = accepted[0].parameters.get("breathing_depth", math.nan)
+            half = accepted[0].intervals.get("breathing_depth", math.nan)
+            asym = next((r for r in round_rows if r.effect == "asymmetry"), None)
+            if asym is not None and abs(depth) <= half and (asym.accepted or "not relevant" not in asym.reason):
+                asym.accepted, asym.reason = True, ""
+                accepted = [asym, *[r for r in accepted if r is not asym]]
         chosen = None
         for r in accepted:
             if r.effect in CRACKS:
@@ -485,6 +495,9 @@ def diagnose_output_error(
         cur_model = (*cur_model, chosen.effect)
         current = fits[chosen.effect]
         say(f"round {rnd}: {chosen.effect} added: residual {current.rms / floor:.3g}x the noise floor")
+    if "static_load" in cands and "static_load" not in cur_model and "nonlinear_stiffness" not in cur_model:
+        notes.append("a static load only shifts a linear rotor's static position, which the probes' gap removal "
+                     "takes away: these waveforms cannot show one (a crack's or a non-linearity's response to it can)")
     # what the data cannot decide: through one critical the whirl runs at about the natural
     # frequency, where a cross-coupled stiffness q acts exactly as a damping -q/w: the
     # fitted damping is c - q, whichever of the two the rotor has

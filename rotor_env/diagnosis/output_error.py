@@ -98,8 +98,10 @@ SEGMENT_LENGTH = 12.0
 GRID_DT = 0.12
 #: at least this many samples per revolution at the top speed on the shooting grid
 GRID_PER_TURN = 24
-#: output offsets fitted with every model (nuisance parameters: the probes' static gap)
-N_OFFSETS = 2
+#: output terms fitted with every model (nuisance parameters): the probes' static offsets
+#: (the gap removed by the mean leaves one) and a runout's 1X pattern (what slow-roll
+#: compensation left)
+N_OFFSETS = 4
 #: forward-difference step for A = df/dx (relative to 1 + |x|) and for the arguments
 _FD_STATE = 1e-7
 _FD_ARG = 1e-6
@@ -475,6 +477,11 @@ class OutputErrorFit:
         for p in eff.argument_parameters:
             v = self.value(f"{effect}.{p.name}")
             out[p.name] = float(v % p.angle_period) if p.orientation else float(v)
+        if effect == "breathing_crack" and out.get("crack_axis", 0.0) >= math.pi:
+            # the crack turned by half a turn with its opening phase turned by half a turn is
+            # the same moment: reported with the axis in [0, pi)
+            out["crack_axis"] -= math.pi
+            out["breathing_phase"] = float((out["breathing_phase"] + 2 * math.pi) % (2 * math.pi) - math.pi)
         return out
 
     def wald(self, effect: str) -> tuple[float, int, float]:
@@ -528,9 +535,18 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset):
     inside = np.zeros(grid.n, dtype=bool)
     for i0, i1 in grid.segments:
         inside[i0:i1 + 1] = True
-    pred[inside] += offset
+    # the output's nuisance terms: static offsets (x, y) and a probe-track runout, a 1X
+    # pattern fixed to the shaft, R e^{i phi} in z = th_y + i th_x (no dynamics: it is in
+    # the reading, not in the rotor)
+    s, c = np.sin(grid.phi[inside]), np.cos(grid.phi[inside])
+    pred[inside, 0] += offset[0] + offset[2] * s + offset[3] * c
+    pred[inside, 1] += offset[1] + offset[2] * c - offset[3] * s
     jac[inside, 0, npar] = 1.0
     jac[inside, 1, npar + 1] = 1.0
+    jac[inside, 0, npar + 2] = s
+    jac[inside, 1, npar + 2] = c
+    jac[inside, 0, npar + 3] = c
+    jac[inside, 1, npar + 3] = -s
     return status, pred, jac
 
 
@@ -650,10 +666,10 @@ def fit_output_error(
             x0 = previous.x0
     pidx, qidx, qlo, qhi, names, owners = _free_layout(kernel, effects, fixed_args)
     npq = len(pidx) + len(qidx) + N_OFFSETS
-    names = (*names, "output.offset_x", "output.offset_y")
-    owners = (*owners, "output", "output")
+    names = (*names, "output.offset_x", "output.offset_y", "output.runout_cos", "output.runout_sin")
+    owners = (*owners, "output", "output", "output", "output")
     x0 = grid.start_states() if x0 is None else np.array(x0, float)
-    offset = previous.offset.copy() if previous is not None else np.zeros(2)
+    offset = previous.offset.copy() if previous is not None else np.zeros(N_OFFSETS)
 
     def pack():
         return np.concatenate([theta[pidx], arg[qidx], offset])
