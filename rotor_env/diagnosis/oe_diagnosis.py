@@ -447,8 +447,7 @@ def diagnose_output_error(
             depth = accepted[0].parameters.get("breathing_depth", math.nan)
             half = accepted[0].intervals.get("breathing_depth", math.nan)
             asym = next((r for r in round_rows if r.effect == "asymmetry"), None)
-            if asym is not None and abs(depth) <= half and (asym.accepted or "not relevant" not in asym.reason):
-                asym.accepted, asym.reason = True, ""
+            if asym is not None and asym.accepted and abs(depth) <= half:
                 accepted = [asym, *[r for r in accepted if r is not asym]]
         chosen = None
         for r in accepted:
