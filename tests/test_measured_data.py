@@ -362,6 +362,37 @@ def test_a_second_critical_in_the_run_is_found_as_a_second_mode():
         assert c["damping_ratio"] == pytest.approx(zeta, rel=0.02)
 
 
+def test_the_2x_vectors_name_a_crack_and_not_a_misalignment(rig):
+    """Issue 24 item 5, the field engineer's crack test on an order-tracked table: a crack (its
+    stiffness turning with the shaft) under a side load makes a 2X that resonates at half the
+    critical; the diagnosis names it from the 1X/2X table with its size D, names a misaligned
+    coupling's 2X as misalignment (not a crack) and nothing on a healthy rotor."""
+    load = {"load_y": 0.02, "load_x": 0.005}  # a side load (gravity): a static deflection of ~20 um
+    rigs = {
+        "crack": ({**load, "D": 0.03}, ("asymmetry", "static_load")),
+        "misalignment": ({**load, "misalignment": 0.002, "misalignment_phase": 0.5}, ("static_load", "misalignment")),
+        "healthy": (load, ("static_load",)),
+    }
+    for name, (extra, effects) in rigs.items():
+        params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6, **extra},
+                             effects=("stiffness", "viscous_damping", "unbalance", *effects))
+        run = simulate_rig(rig, params, rpm_from=500.0, rpm_to=2200.0, rpm_per_s=300.0, noise=0.3, seed=4,
+                           sample_rate=2000.0)
+        table = run.vectors(rig)  # 1X and 2X, as `rotor-id simulate --vectors` writes them
+        if name == "crack":  # the 2X resonance at half the critical, where 2x speed meets it
+            peak = table.rpm[np.argmax(np.abs(table.vectors[2]).max(axis=1))]
+            assert peak == pytest.approx(1650.0 / 2, rel=0.08)
+        out = diagnose_vectors(table, candidates=("asymmetry", "misalignment")).to_dict()
+        if name == "crack":
+            assert out["missing"] == ["asymmetry"]
+            assert out["physical"]["asymmetry"]["D"] == pytest.approx(0.03, rel=0.05)
+        elif name == "misalignment":
+            assert out["missing"] == ["misalignment"]
+        else:
+            assert out["missing"] == []
+        assert out["verdict"] in ("explained", "explained_after_adding"), name
+
+
 def test_absolute_time_stamps_give_the_same_fit(rig):
     """A table stamped in epoch seconds (1.7e9 s) fits as one starting at 0."""
     from rotor_env.diagnosis.synchronous import SynchronousModel, fit_vectors

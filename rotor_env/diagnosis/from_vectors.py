@@ -42,8 +42,14 @@ __all__ = ["VECTOR_CANDIDATES", "VECTOR_MODEL", "VectorDiagnosis", "check_whirl_
            "vector_noise_floor"]
 
 VECTOR_MODEL: tuple[str, ...] = ("viscous_damping", "unbalance")
+#: the candidates whose evidence is the 2X vectors (a crack turns the static deflection into a
+#: 2X forcing, resonant at half the critical; a misaligned coupling forces 2X directly): tried
+#: when the table has 2X columns and a time column
+VECTOR_CANDIDATES_2X: tuple[str, ...] = ("asymmetry", "breathing_crack", "misalignment")
 VECTOR_CANDIDATES: tuple[str, ...] = ("shaft_bow", RUNOUT, "support_anisotropy", "cross_coupled_stiffness",
-                                       SECOND_MODE)
+                                       SECOND_MODE, *VECTOR_CANDIDATES_2X)
+#: the side load a crack's 2X needs (gravity on a horizontal rotor): fitted with it
+SIDE_LOAD = "static_load"
 #: a candidate must remove this share of the residual energy above the floor
 MIN_GAIN = 0.10
 #: and be significant at this level (HAC Wald test), and stricter than alpha when alpha is loose
@@ -137,7 +143,7 @@ def check_whirl_direction(table: VectorTable, floor: float) -> None:
 
 def _time_major(fit: VectorFit) -> tuple[np.ndarray, np.ndarray, int]:
     """Jacobian and residual reordered row by row (re, im of each probe), rows per speed."""
-    valid = np.isfinite(fit.table.vectors[1])
+    valid = np.isfinite(fit.measured)
     n = int(valid.sum())
     r = fit.residual[valid]
     order = np.empty(2 * n, dtype=int)
@@ -490,6 +496,12 @@ def diagnose_vectors(
     current, missing, tested, rejected = before, [], [], []
     log10_alpha = min(math.log10(alpha), LOG10_P_MAX)
     remaining = [c for c in candidates if c not in current.model.names]
+    if 2 not in before.orders:
+        skip = [c for c in remaining if c in VECTOR_CANDIDATES_2X]
+        if skip:
+            notes.append(f"no 2X vectors (or no time column, or several probes without their angles): "
+                         f"{', '.join(skip)} not tested")
+            remaining = [c for c in remaining if c not in skip]
     if table.angles is None and len(table.probes) > 1:
         skip = [c for c in remaining if c != RUNOUT and get_effect(c).name in ("support_anisotropy",)]
         if skip:
@@ -501,8 +513,12 @@ def diagnose_vectors(
         excess = current.rms ** 2 - floor ** 2
         best = None
         for cand in remaining:
+            trial = current.model.with_effect(cand)
+            if cand != RUNOUT and cand != SECOND_MODE and trial.kinds.get(cand) == "rotating" \
+                    and SIDE_LOAD not in trial.effects:
+                trial = trial.with_effect(SIDE_LOAD)  # its 2X is the side load's static deflection, turned
             try:
-                fit = fit_vectors(table, current.model.with_effect(cand), method=current.method, start=current)
+                fit = fit_vectors(table, trial, method=current.method, start=current)
             except (ValueError, FloatingPointError) as exc:
                 rejected.append({"effect": cand, "rule": f"cannot be fitted: {exc}"})
                 continue
