@@ -34,6 +34,23 @@ the natural frequency beating against 1X) follow it: only the transient carries 
 ``method="auto"`` compares the two at the first fit and keeps the quasi-steady one only
 where it is within 1 % of the peak everywhere (it is faster).
 
+The transient run is the simulator's RK4 (48 steps a turn) on one grid in seconds per fit:
+where the model does not change with the speed (no gyroscopic term, no rotating effect)
+its steps are one linear recursion ``x <- Phi x + G f`` written out from the RK4 stages
+(:func:`_rk4_linear`, the same numbers to rounding), compiled, and the forcing's columns
+are evaluated once per table; otherwise the compiled kernel integrates it.
+
+2X
+--
+A table with ``_2x`` columns and a time column is fitted at 1X and 2X together (the probes
+of each order side by side).  An effect whose stiffness turns with the shaft (``asymmetry``,
+``breathing_crack``: *rotating*) is a nonlinear parameter like a structural one, carried
+by the transient run only: a crack turns a static deflection (``static_load``, the side
+load, a forcing) into 2X, which resonates where 2x the speed meets the natural frequency —
+half the critical.  A 2X forcing (``misalignment``) is linear like the unbalance.  Nothing
+of their physics is written here: the run integrates the declared columns and the tracker
+reads its 1X and 2X, as the data's tracker did.
+
 Critical speeds and damping ratios
 ----------------------------------
 The eigenvalues ``lambda`` of the linearised model at speed ``W``; a critical is a speed
@@ -319,7 +336,8 @@ def _quasi_steady(model: SynchronousModel, coef_struct: np.ndarray, forcing_coef
     lin = _poly_fit(lambda w, wd: np.stack(model.linearised(coef_struct, w)), _POINTS, basis)
     forc = _poly_fit(lambda w, wd: np.column_stack([model.forcing_1x(c, w, wd) for c in forcing_coefs]),
                      _POINTS, basis) if forcing_coefs else None
-    X = np.column_stack([basis(w, wd) for w, wd in zip(W, Wdot, strict=True)]).T  # (rows, 4)
+    X = (np.column_stack([np.ones_like(W), W, W * W, Wdot]) if basis is _speed_basis
+         else np.column_stack([basis(w, wd) for w, wd in zip(W, Wdot, strict=True)]).T)  # (rows, 4)
     if lin is not None and forcing_coefs and forc is not None:
         AA = np.einsum("rb,bkij->rkij", X, lin)
         F = np.einsum("rb,bcn->rcn", X.astype(complex), forc)
@@ -354,6 +372,10 @@ class _Profile:
 
     def steps(self) -> _Steps:
         """The RK4 steps of the kernel on this grid: the step and the spin at each step's stages."""
+        if "steps" not in self._cache and "base" in self._cache:
+            base, w_ref = self._cache["base"]
+            b = base.steps()
+            self._cache["steps"] = _Steps(b.h * w_ref, tuple((phi, W / w_ref, a / w_ref**2) for phi, W, a in b.stages))
         if "steps" not in self._cache:
             dt = np.diff(self.grid)
             p0, w0 = self.phi[:-1], self.speed[:-1]
@@ -371,14 +393,16 @@ class _Steps:
     stages: tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]  #: (phi, speed, accel) at t, t + h/2, t + h
 
 
-def _profile(tau: np.ndarray, W: np.ndarray, orders: tuple[int, ...] = (1,)) -> _Profile:
+def _profile(tau: np.ndarray, W: np.ndarray, orders: tuple[int, ...] = (1,), h: float | None = None) -> _Profile:
     """The grid a :func:`_transient` run follows (it depends on the time scale only, not on
-    the model: a fit's many runs at one ``w_ref`` share it)."""
+    the model: a fit's many runs at one ``w_ref`` share it).  Any time unit: ``h`` the step
+    in it (default the model time's rule below)."""
     speed = PchipInterpolator(tau, W, extrapolate=True)
     w_max = float(W.max())
     lead = LEAD_IN_REVS * 2 * math.pi / max(float(W[0]), 1e-3)
     # RK4 and the trapezoid in phi: 48 steps a turn keep both below 1e-4 of the peak
-    h = min(0.05, 2 * math.pi / (48.0 * w_max))
+    if h is None:
+        h = min(0.05, 2 * math.pi / (48.0 * w_max))
     t0, t1 = float(tau[0]) - lead, float(tau[-1]) + 2 * math.pi / max(float(W[-1]), 1e-3)
     grid = np.arange(t0, t1 + h, h)
     # before the first row the profile goes on as it came in (linearly): the first row's
@@ -396,6 +420,31 @@ def _profile(tau: np.ndarray, W: np.ndarray, orders: tuple[int, ...] = (1,)) -> 
     phi -= np.interp(tau[0] - math.pi / W[0], grid, phi)
     phi_rows = np.interp(tau - math.pi / W, grid, phi) + math.pi
     return _Profile(grid, phi, Wg, phi_rows, OrderTracker(grid, phi, orders, at=phi_rows))
+
+
+def _scaled(base: _Profile, w_ref: float) -> _Profile:
+    """A profile in seconds seen in the model's time (``t w_ref``, speed ``/ w_ref``): the
+    angle, the rows and the tracker are the same at every ``w_ref``."""
+    prof = _Profile(base.grid * w_ref, base.phi, base.speed / w_ref, base.phi_rows, base.tracker)
+    prof._cache["base"] = (base, w_ref)
+    return prof
+
+
+def _speed_power(effect: str, ip: float) -> int | None:
+    """``p`` when the effect's columns at zero state scale as ``s^p`` for speed ``s W`` and
+    acceleration ``s^2 a`` (the unbalance: 2, a bow or a misalignment: 0), else None."""
+    rng = np.random.default_rng(1)
+    phi, W, a = rng.uniform(0, 6, 5), rng.uniform(0.2, 2, 5), rng.uniform(-0.01, 0.01, 5)
+    z = np.zeros(5)
+    cols = get_effect(effect).columns
+    ref = np.array([np.broadcast_to(v, (5,)) for v in (*cols(phi, W, a, z, z, z, z, ip)[0],
+                                                          *cols(phi, W, a, z, z, z, z, ip)[1])])
+    new = np.array([np.broadcast_to(v, (5,)) for v in (*cols(phi, 1.3 * W, 1.69 * a, z, z, z, z, ip)[0],
+                                                          *cols(phi, 1.3 * W, 1.69 * a, z, z, z, z, ip)[1])])
+    for p in (0, 1, 2, 3):
+        if np.allclose(new, ref * 1.3**p, rtol=1e-12, atol=1e-15):
+            return p
+    return None
 
 
 def _start_state(model: SynchronousModel, coef_struct: np.ndarray, c: np.ndarray, w0: float,
@@ -434,11 +483,13 @@ def _start_state(model: SynchronousModel, coef_struct: np.ndarray, c: np.ndarray
 
 
 @njit(cache=True)
-def _linear_steps(Phi, G1, G2, G4, f1, f2, f4, x0, out):  # pragma: no cover - compiled
+def _linear_steps(Phi, G1, G2, G4, f1, f2, f4, x0, out, col):  # pragma: no cover - compiled
     """``x[k+1] = Phi x[k] + G1 f1[k] + G2 f2[k] + G4 f4[k]`` from ``x[0] = x0`` (``G``: the
-    columns acting on the acceleration, (4, 2)); ``out[k]`` = ``(th_y, th_x)`` of ``x[k]``."""
+    columns acting on the acceleration, (4, 2)); ``out[k, col:col + 2]`` = ``(th_y, th_x)`` of
+    ``x[k]``.  Returns the largest ``|th|`` (NaN stays NaN)."""
     x0_, x1, x2, x3 = x0[0], x0[1], x0[2], x0[3]
-    out[0, 0], out[0, 1] = x1, x0_
+    out[0, col], out[0, col + 1] = x1, x0_
+    big = max(abs(x0_), abs(x1))
     for k in range(f1.shape[0]):
         a1x, a1y, a2x, a2y, a4x, a4y = f1[k, 0], f1[k, 1], f2[k, 0], f2[k, 1], f4[k, 0], f4[k, 1]
         y0 = (Phi[0, 0] * x0_ + Phi[0, 1] * x1 + Phi[0, 2] * x2 + Phi[0, 3] * x3 + G1[0, 0] * a1x + G1[0, 1] * a1y
@@ -450,7 +501,11 @@ def _linear_steps(Phi, G1, G2, G4, f1, f2, f4, x0, out):  # pragma: no cover - c
         y3 = (Phi[3, 0] * x0_ + Phi[3, 1] * x1 + Phi[3, 2] * x2 + Phi[3, 3] * x3 + G1[3, 0] * a1x + G1[3, 1] * a1y
               + G2[3, 0] * a2x + G2[3, 1] * a2y + G4[3, 0] * a4x + G4[3, 1] * a4y)
         x0_, x1, x2, x3 = y0, y1, y2, y3
-        out[k + 1, 0], out[k + 1, 1] = x1, x0_
+        out[k + 1, col], out[k + 1, col + 1] = x1, x0_
+        big = max(big, abs(x0_), abs(x1))
+        if not big < 1e3:
+            return big
+    return big
 
 
 def _lti_matrix(model: SynchronousModel, coef_struct: np.ndarray) -> np.ndarray | None:
@@ -490,6 +545,17 @@ def _forcing_series(model: SynchronousModel, c: np.ndarray, phi: np.ndarray, W: 
     return out
 
 
+def _stage_columns(prof: _Profile, effect: str, ip: float) -> list[list[np.ndarray]]:
+    """Per RK4 stage, per coefficient: the effect's ``(a_x, a_y)`` columns at zero state."""
+    cols = []
+    for phi, W, a in prof.steps().stages:
+        zero = np.zeros_like(phi)
+        cy, cx = get_effect(effect).columns(phi, W, a, zero, zero, zero, zero, ip)
+        cols.append([np.column_stack([np.broadcast_to(x, phi.shape), np.broadcast_to(y, phi.shape)])
+                     for x, y in zip(cx, cy, strict=True)])
+    return cols
+
+
 def _effect_forcing(prof: _Profile, model: SynchronousModel, c: np.ndarray) -> tuple[np.ndarray, ...]:
     """:func:`_forcing_series` at the three RK4 stages of ``prof``, kept with the grid (the
     forcing depends on the spin only); an effect's columns are evaluated once for all its
@@ -502,14 +568,19 @@ def _effect_forcing(prof: _Profile, model: SynchronousModel, c: np.ndarray) -> t
         if owner and c[nz[0]] == 1.0:
             e = owner[0]
             ckey = ("columns", e, model.ip)
+            base = prof._cache.get("base")
+            power = _speed_power(e, model.ip) if base is not None else None
+            if power is not None and ckey not in prof._cache:
+                # evaluated once per table (at the first time scale) and scaled: s^p
+                bprof, w_ref = base
+                rkey = ("ref_columns", e, model.ip)
+                if rkey not in bprof._cache:
+                    bprof._cache[rkey] = (w_ref, _stage_columns(prof, e, model.ip))
+                w0, cols = bprof._cache[rkey]
+                f = (w0 / w_ref) ** power
+                prof._cache[ckey] = [[f * x for x in stage] for stage in cols]
             if ckey not in prof._cache:
-                cols = []
-                for phi, W, a in prof.steps().stages:
-                    zero = np.zeros_like(phi)
-                    cy, cx = get_effect(e).columns(phi, W, a, zero, zero, zero, zero, model.ip)
-                    cols.append([np.column_stack([np.broadcast_to(x, phi.shape), np.broadcast_to(y, phi.shape)])
-                                 for x, y in zip(cx, cy, strict=True)])
-                prof._cache[ckey] = cols
+                prof._cache[ckey] = _stage_columns(prof, e, model.ip)
             q = nz[0] - slots[e].start
             prof._cache[key] = tuple(np.ascontiguousarray(stage[q]) for stage in prof._cache[ckey])
         else:
@@ -542,24 +613,22 @@ def _transient(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: 
     accel = compile_accel(model.layout)
     out = np.empty((len(tau), 2 * len(orders), len(forcing_coefs)), dtype=complex)
     sims = np.empty((len(grid), 2 * len(forcing_coefs)))
-    buf = np.empty((len(grid), 10))
     A = _lti_matrix(model, coef_struct)
     if A is not None:
         # the same RK4 steps as the compiled kernel, as one linear recursion: the forcing at
         # every step's stages at once (numpy), then x <- Phi x + g (no acceleration calls)
         steps = prof.steps()
         Phi, G1, G2, G4 = _rk4_linear(A, steps.h)
+        Gs = [np.ascontiguousarray(G[:, 2:]) for G in (G1, G2, G4)]
     for j, c in enumerate(forcing_coefs):
         # start on the steady-state response at the first speed: no artificial transient
         state = _start_state(model, coef_struct, c, float(Wg[0]), float(phi[0]))
         if A is not None:
             f1, f2, f4 = _effect_forcing(prof, model, c)
-            run = np.empty((len(grid), 2))
-            _linear_steps(Phi, G1[:, 2:].copy(), G2[:, 2:].copy(), G4[:, 2:].copy(), f1, f2, f4, state, run)
-            if not np.abs(run).max() < 1e3:  # the kernel's bound (NaN included)
-                raise FloatingPointError("the synchronous model diverged (unstable parameters)")
-            sims[:, 2 * j : 2 * j + 2] = run
+            if not _linear_steps(Phi, Gs[0], Gs[1], Gs[2], f1, f2, f4, state, sims, 2 * j) < 1e3:
+                raise FloatingPointError("the synchronous model diverged (unstable parameters)")  # the kernel's bound
             continue
+        buf = np.empty((len(grid), 10))
         buf[0, 4], buf[0, 5] = state[0], state[1]
         done = call_integrate_profile(accel, state, grid, phi, Wg, model.ip, coef_struct + c, 0.0, 1, buf)
         if done < len(grid):
@@ -604,6 +673,9 @@ class _Problem:
         self.method = method
         #: w_ref -> the transient runs' grid at that time scale (the Jacobian's columns share it)
         self._profiles: dict[float, _Profile] = {}
+        self._base: _Profile | None = None
+        self._memo: dict[tuple[bytes, str], np.ndarray] = {}
+        self._mode_memo: dict[tuple, np.ndarray] = {}
         scale = np.nanmax(np.abs(self.Y))
         self.scale = float(scale) if scale > 0 else 1.0
         slots = model._slots()
@@ -636,9 +708,20 @@ class _Problem:
         return [(math.exp(x[j + 2 * m]), float(x[j + 2 * m + 1])) for m in range(self.n_extra)]
 
     def basis_vectors(self, x: np.ndarray, method: str | None = None) -> np.ndarray:
-        """(rows, probes, n_lin) complex basis of the linear parameters."""
-        w_ref, st = self.unpack(x)
+        """(rows, probes, n_lin) complex basis of the linear parameters (the last few kept: the
+        Jacobian's columns of the linear parameters, and the final checks, ask for the same ``x``)."""
         method = method or self.method
+        key = (np.asarray(x, dtype=float).tobytes(), method)
+        hit = self._memo.get(key)
+        if hit is None:
+            hit = self._basis_vectors(np.asarray(x, dtype=float), method)
+            if len(self._memo) >= 3:
+                self._memo.pop(next(iter(self._memo)))
+            self._memo[key] = hit
+        return hit.copy()
+
+    def _basis_vectors(self, x: np.ndarray, method: str) -> np.ndarray:
+        w_ref, st = self.unpack(x)
         own = [(e, q) for e, q in self.basis if e != SECOND_MODE]
         B = self._mode_basis(self.model, self.model.coef_vector(st), own, w_ref, method)
         for w2, c2 in self.extra_modes(x):
@@ -658,7 +741,20 @@ class _Problem:
         return probes
 
     def _mode_basis(self, model: SynchronousModel, coef: np.ndarray, basis, w_ref: float, method: str) -> np.ndarray:
-        """(rows, 2, n) responses of one mode to each unit forcing coefficient."""
+        """(rows, 2, n) responses of one mode to each unit forcing coefficient (the last few kept:
+        a difference step in one mode's parameters leaves the other mode's runs as they were)."""
+        key = (model.effects, model.ip, model.runout, model.modes, np.asarray(coef, dtype=float).tobytes(),
+               tuple(basis), float(w_ref), method)
+        hit = self._mode_memo.get(key)
+        if hit is None:
+            hit = self._mode_basis_run(model, coef, basis, w_ref, method)
+            if len(self._mode_memo) >= 6:
+                self._mode_memo.pop(next(iter(self._mode_memo)))
+            self._mode_memo[key] = hit
+        return hit
+
+    def _mode_basis_run(self, model: SynchronousModel, coef: np.ndarray, basis, w_ref: float,
+                        method: str) -> np.ndarray:
         fc = []
         for e, q in basis:
             c = np.zeros_like(coef)
@@ -675,7 +771,12 @@ class _Problem:
             if prof is None:
                 if len(self._profiles) >= 4:  # a fit moves w_ref: keep the latest few
                     self._profiles.pop(next(iter(self._profiles)))
-                prof = self._profiles[w_ref] = _profile(tau, W, self.orders)
+                if self._base is None:
+                    # one grid in seconds for the whole fit (its step from the first time scale):
+                    # the angle, the rows, the tracker and the forcing's columns are set up once
+                    h = min(0.05, 2 * math.pi / (48.0 * float(W.max()))) / w_ref
+                    self._base = _profile(self.table.t - self.table.t[0], self.table.speed, self.orders, h=h)
+                prof = self._profiles[w_ref] = _scaled(self._base, w_ref)
             return _transient(model, coef, fc, tau, W, coast_down=self.coast_down, profile=prof,
                               orders=self.orders)
         if self.orders != (1,):
