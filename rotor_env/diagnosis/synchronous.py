@@ -63,6 +63,7 @@ The same eigenvalues, each signed by its whirl, are the branches of the Campbell
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -370,6 +371,13 @@ class _Profile:
     tracker: OrderTracker  #: the orders per revolution centred on each row
     _cache: dict = field(default_factory=dict, compare=False, repr=False)
 
+    def step(self) -> float:
+        """The grid's step (without the stages)."""
+        if "base" in self._cache:
+            base, w_ref = self._cache["base"]
+            return base.steps().h * w_ref
+        return self.steps().h
+
     def steps(self) -> _Steps:
         """The RK4 steps of the kernel on this grid: the step and the spin at each step's stages."""
         if "steps" not in self._cache and "base" in self._cache:
@@ -430,6 +438,7 @@ def _scaled(base: _Profile, w_ref: float) -> _Profile:
     return prof
 
 
+@functools.cache
 def _speed_power(effect: str, ip: float) -> int | None:
     """``p`` when the effect's columns at zero state scale as ``s^p`` for speed ``s W`` and
     acceleration ``s^2 a`` (the unbalance: 2, a bow or a misalignment: 0), else None."""
@@ -556,36 +565,28 @@ def _stage_columns(prof: _Profile, effect: str, ip: float) -> list[list[np.ndarr
     return cols
 
 
-def _effect_forcing(prof: _Profile, model: SynchronousModel, c: np.ndarray) -> tuple[np.ndarray, ...]:
-    """:func:`_forcing_series` at the three RK4 stages of ``prof``, kept with the grid (the
-    forcing depends on the spin only); an effect's columns are evaluated once for all its
-    coefficients."""
+def _effect_forcing(prof: _Profile, model: SynchronousModel, c: np.ndarray) -> tuple[tuple[np.ndarray, ...], float]:
+    """:func:`_forcing_series` at the three RK4 stages of ``prof`` and a factor to apply to them.
+    The forcing depends on the spin only: a unit coefficient's columns are evaluated once per
+    table (at its first time scale) where they scale as a power of the time scale (the
+    unbalance as its square; :func:`_speed_power`), else once per grid."""
+    nz = np.flatnonzero(c)
+    slots = model._slots()
+    base = prof._cache.get("base")
+    owner = [e for e in model.forcing if slots[e].start <= nz[0] < slots[e].stop] if len(nz) == 1 else []
+    if owner and c[nz[0]] == 1.0 and base is not None and _speed_power(owner[0], model.ip) is not None:
+        e, q = owner[0], int(nz[0] - slots[owner[0]].start)
+        bprof, w_ref = base
+        rkey = ("ref_columns", e, model.ip)
+        if rkey not in bprof._cache:
+            bprof._cache[rkey] = (w_ref, [[np.ascontiguousarray(x) for x in stage]
+                                          for stage in _stage_columns(prof, e, model.ip)])
+        w0, cols = bprof._cache[rkey]
+        return tuple(stage[q] for stage in cols), (w0 / w_ref) ** _speed_power(e, model.ip)
     key = ("forcing", model.forcing, model.ip, c.tobytes())
     if key not in prof._cache:
-        nz = np.flatnonzero(c)
-        slots = model._slots()
-        owner = [e for e in model.forcing if slots[e].start <= nz[0] < slots[e].stop] if len(nz) == 1 else []
-        if owner and c[nz[0]] == 1.0:
-            e = owner[0]
-            ckey = ("columns", e, model.ip)
-            base = prof._cache.get("base")
-            power = _speed_power(e, model.ip) if base is not None else None
-            if power is not None and ckey not in prof._cache:
-                # evaluated once per table (at the first time scale) and scaled: s^p
-                bprof, w_ref = base
-                rkey = ("ref_columns", e, model.ip)
-                if rkey not in bprof._cache:
-                    bprof._cache[rkey] = (w_ref, _stage_columns(prof, e, model.ip))
-                w0, cols = bprof._cache[rkey]
-                f = (w0 / w_ref) ** power
-                prof._cache[ckey] = [[f * x for x in stage] for stage in cols]
-            if ckey not in prof._cache:
-                prof._cache[ckey] = _stage_columns(prof, e, model.ip)
-            q = nz[0] - slots[e].start
-            prof._cache[key] = tuple(np.ascontiguousarray(stage[q]) for stage in prof._cache[ckey])
-        else:
-            prof._cache[key] = tuple(_forcing_series(model, c, *stage) for stage in prof.steps().stages)
-    return prof._cache[key]
+        prof._cache[key] = tuple(_forcing_series(model, c, *stage) for stage in prof.steps().stages)
+    return prof._cache[key], 1.0
 
 
 def _rk4_linear(A: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -617,15 +618,14 @@ def _transient(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: 
     if A is not None:
         # the same RK4 steps as the compiled kernel, as one linear recursion: the forcing at
         # every step's stages at once (numpy), then x <- Phi x + g (no acceleration calls)
-        steps = prof.steps()
-        Phi, G1, G2, G4 = _rk4_linear(A, steps.h)
+        Phi, G1, G2, G4 = _rk4_linear(A, prof.step())
         Gs = [np.ascontiguousarray(G[:, 2:]) for G in (G1, G2, G4)]
     for j, c in enumerate(forcing_coefs):
         # start on the steady-state response at the first speed: no artificial transient
         state = _start_state(model, coef_struct, c, float(Wg[0]), float(phi[0]))
         if A is not None:
-            f1, f2, f4 = _effect_forcing(prof, model, c)
-            if not _linear_steps(Phi, Gs[0], Gs[1], Gs[2], f1, f2, f4, state, sims, 2 * j) < 1e3:
+            (f1, f2, f4), k = _effect_forcing(prof, model, c)
+            if not _linear_steps(Phi, k * Gs[0], k * Gs[1], k * Gs[2], f1, f2, f4, state, sims, 2 * j) < 1e3:
                 raise FloatingPointError("the synchronous model diverged (unstable parameters)")  # the kernel's bound
             continue
         buf = np.empty((len(grid), 10))
