@@ -36,11 +36,11 @@ from rotor_env.diagnosis.from_vectors import diagnose_vectors
 from rotor_env.measurements.vectors import load_vector_table
 table = load_vector_table(sys.argv[1], angles={"x": 45.0, "y": -45.0})
 times = []
-for _ in range(int(sys.argv[2]) + 1):  # the first call compiles (numba): not counted
+for _ in range(int(sys.argv[2]) + 1):  # the first call compiles (numba): not counted unless alone
     t0 = time.perf_counter()
     out = diagnose_vectors(table).to_dict()
     times.append(time.perf_counter() - t0)
-print(json.dumps({"first_s": times[0], "best_s": min(times[1:]), "criticals": out["criticals"],
+print(json.dumps({"first_s": times[0], "best_s": min(times[1:] or times), "criticals": out["criticals"],
                   "missing": out["missing"], "verdict": out["verdict"], "rows": len(table.speed)}))
 """
 
@@ -80,7 +80,9 @@ def export(rev: str, into: Path) -> Path:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--baseline", default="main", help="git revision to compare with (default: main)")
-    ap.add_argument("--repeat", type=int, default=1, help="timed calls after the warm-up (best is reported)")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="timed calls after the warm-up (best is reported); 0: the first call only (numba's "
+                         "kernels cached on disk from an earlier run: about the warm time)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
