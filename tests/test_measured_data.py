@@ -259,6 +259,33 @@ def test_critical_speed_and_damping_ratio_within_one_percent(rig, natural_rpm, c
     assert out["method"] == "transient"
 
 
+def test_vector_noise_floor_is_the_known_noise_within_30_percent(rig):
+    """Issue 25 item 3: the floor of simulated vectors with known probe noise, against the truth
+    (the RMS of the noisy table minus the same run's noiseless one), over noise levels, seeds,
+    rotors, sweep rates, sample rates and a coast-down; the critical's peak and the free whirl's
+    ripples after it are in every run (they inflated the floor 5x)."""
+    from rotor_env.diagnosis.from_vectors import vector_noise_floor
+    from rotor_env.diagnosis.synchronous import SynchronousModel, fit_vectors
+
+    cases = [  # (noise um, seed, params, natural rpm, rpm range, rpm/s, sample rate)
+        (0.3, 1, _params(bow=0.004), 1650.0, (300.0, 3000.0), 230.0, 5000.0),  # the README's table
+        (0.1, 2, _params(c=0.1), 1650.0, (300.0, 3000.0), 230.0, 3000.0),
+        (1.0, 3, _params(support_anisotropy=0.08), 1650.0, (300.0, 3000.0), 230.0, 3000.0),
+        (3.0, 4, _params(), 2400.0, (4000.0, 600.0), -300.0, 2000.0),
+        # a lightly damped rotor (zeta 0.01) and faint noise: the ripples fill half the run, and
+        # only the start model's residual (which follows them) shows the noise, as in the diagnosis
+        (0.03, 5, _params(c=0.02), 1000.0, (300.0, 2000.0), 150.0, 3000.0),
+    ]
+    for noise, seed, params, natural, rpm, rate, fs in cases:
+        tables = [simulate_rig(rig, params, natural_rpm=natural, rpm_from=rpm[0], rpm_to=rpm[1], rpm_per_s=rate,
+                               noise=n, seed=seed, sample_rate=fs).vectors(rig, (1,)) for n in (noise, 0.0)]
+        truth = math.sqrt(np.mean(np.abs(tables[0].vectors[1] - tables[1].vectors[1]) ** 2))
+        residual = None
+        if noise < 0.1:
+            residual = fit_vectors(tables[0], SynchronousModel(("viscous_damping", "unbalance"))).residual
+        assert vector_noise_floor(tables[0], residual=residual) == pytest.approx(truth, rel=0.3), (noise, seed)
+
+
 def test_a_run_below_the_critical_says_so_and_extrapolates_with_its_error(rig):
     table = _table(rig, _params(), rpm=(300.0, 1200.0), seed=2)
     out = diagnose_vectors(table).to_dict()
@@ -333,6 +360,37 @@ def test_a_second_critical_in_the_run_is_found_as_a_second_mode():
     for c, (wn, zeta) in zip(out["criticals"], ((1650, 0.02), (3300, 0.03)), strict=True):
         assert c["rpm"] == pytest.approx(wn * math.sqrt(1 - zeta**2), rel=0.01)
         assert c["damping_ratio"] == pytest.approx(zeta, rel=0.02)
+
+
+def test_the_2x_vectors_name_a_crack_and_not_a_misalignment(rig):
+    """Issue 24 item 5, the field engineer's crack test on an order-tracked table: a crack (its
+    stiffness turning with the shaft) under a side load makes a 2X that resonates at half the
+    critical; the diagnosis names it from the 1X/2X table with its size D, names a misaligned
+    coupling's 2X as misalignment (not a crack) and nothing on a healthy rotor."""
+    load = {"load_y": 0.02, "load_x": 0.005}  # a side load (gravity): a static deflection of ~20 um
+    rigs = {
+        "crack": ({**load, "D": 0.03}, ("asymmetry", "static_load")),
+        "misalignment": ({**load, "misalignment": 0.002, "misalignment_phase": 0.5}, ("static_load", "misalignment")),
+        "healthy": (load, ("static_load",)),
+    }
+    for name, (extra, effects) in rigs.items():
+        params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6, **extra},
+                             effects=("stiffness", "viscous_damping", "unbalance", *effects))
+        run = simulate_rig(rig, params, rpm_from=500.0, rpm_to=2200.0, rpm_per_s=300.0, noise=0.3, seed=4,
+                           sample_rate=2000.0)
+        table = run.vectors(rig)  # 1X and 2X, as `rotor-id simulate --vectors` writes them
+        if name == "crack":  # the 2X resonance at half the critical, where 2x speed meets it
+            peak = table.rpm[np.argmax(np.abs(table.vectors[2]).max(axis=1))]
+            assert peak == pytest.approx(1650.0 / 2, rel=0.08)
+        out = diagnose_vectors(table, candidates=("asymmetry", "misalignment")).to_dict()
+        if name == "crack":
+            assert out["missing"] == ["asymmetry"]
+            assert out["physical"]["asymmetry"]["D"] == pytest.approx(0.03, rel=0.05)
+        elif name == "misalignment":
+            assert out["missing"] == ["misalignment"]
+        else:
+            assert out["missing"] == []
+        assert out["verdict"] in ("explained", "explained_after_adding"), name
 
 
 def test_absolute_time_stamps_give_the_same_fit(rig):

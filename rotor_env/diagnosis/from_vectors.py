@@ -6,8 +6,10 @@ The same loop as the waveform diagnosis, on the synchronous model of
 1. fit the start model (damping and unbalance; ``w_ref`` carries the stiffness);
 2. the noise floor of the vectors from their row-to-row roughness: for independent
    complex noise of variance ``s^2`` per vector, the second difference across rows has
-   ``E|d2|^2 = 6 s^2`` and ``median |d2|^2 = 6 s^2 ln 2`` (robust to the peak and the
-   ripples, which occupy few rows);
+   ``E|d2|^2 = 6 s^2`` and ``median |d2|^2 = 6 s^2 ln 2``, taken band by band on the raw
+   vectors and on the start model's residual (which follows the peak and the ripples
+   after it), the bands where the response itself is rough left out by a robust fit of
+   the noise's variance against speed (:func:`vector_noise_floor`);
 3. each candidate that shows in 1X data (bow, support anisotropy, cross-coupled
    stiffness, probe runout) is fitted in turn; it is added when its parameters are
    significant by a HAC Wald test (the residuals of neighbouring rows are correlated:
@@ -26,6 +28,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import nnls
 
 from identifier.hac import hac_covariance, wald_test
 
@@ -39,41 +42,67 @@ __all__ = ["VECTOR_CANDIDATES", "VECTOR_MODEL", "VectorDiagnosis", "check_whirl_
            "vector_noise_floor"]
 
 VECTOR_MODEL: tuple[str, ...] = ("viscous_damping", "unbalance")
+#: the candidates whose evidence is the 2X vectors (a crack turns the static deflection into a
+#: 2X forcing, resonant at half the critical; a misaligned coupling forces 2X directly): tried
+#: when the table has 2X columns and a time column
+VECTOR_CANDIDATES_2X: tuple[str, ...] = ("asymmetry", "breathing_crack", "misalignment")
 VECTOR_CANDIDATES: tuple[str, ...] = ("shaft_bow", RUNOUT, "support_anisotropy", "cross_coupled_stiffness",
-                                       SECOND_MODE)
+                                       SECOND_MODE, *VECTOR_CANDIDATES_2X)
+#: the side load a crack's 2X needs (gravity on a horizontal rotor): fitted with it
+SIDE_LOAD = "static_load"
 #: a candidate must remove this share of the residual energy above the floor
 MIN_GAIN = 0.10
 #: and be significant at this level (HAC Wald test), and stricter than alpha when alpha is loose
 LOG10_P_MAX = -3.0
 
 
-def vector_noise_floor(table: VectorTable, bands: int = 8) -> float:
+def vector_noise_floor(table: VectorTable, bands: int = 8, residual: np.ndarray | None = None) -> float:
     """RMS of the noise per complex vector, from the rows' second differences (see module doc).
 
-    The noise of per-revolution vectors changes along a run (a revolution holds fewer
-    samples at speed: its variance grows with the speed), so the robust estimate is taken
-    in ``bands`` consecutive groups of rows and the floor is the RMS over the rows of their
-    band's value.  A band's median ignores the peak and the ripples as long as they fill
-    less than half of it; where a band is dominated by them (its value above twice its
-    neighbours' larger one), the neighbours' larger one is used.
+    The noise of a per-revolution vector grows along a run with the speed (a revolution
+    holds fewer samples: with a fixed sample rate its variance is proportional to the
+    speed; with a fixed number of samples a turn, constant), so its variance is taken as
+    ``a + b W`` (``a, b >= 0``) fitted to robust levels of ``bands`` consecutive groups of
+    rows, and the floor is the RMS of that over the rows.  A band's level is the median of
+    its ``|d2|^2`` over ``6 ln 2``: it ignores what fills less than half of it.  Around a
+    fast critical the response itself is rough from row to row (the peak, and the free
+    whirl beating against 1X for many revolutions after it): those bands stand far above
+    the others, and the band standing furthest above the fit (more than twice it) is left
+    out, one at a time, while more than half are kept.  ``residual``: a fitted model's
+    residual (rows, probes); its second differences carry the noise without the peak and
+    the ripples the model follows, and each band's level is the lower of the two.
     """
-    Y = table.vectors[1]
-    d2 = Y[2:] - 2 * Y[1:-1] + Y[:-2]
-    p2 = np.abs(d2) ** 2
-    p2 = p2.reshape(len(p2), -1)
-    ok = np.isfinite(p2).all(axis=1)
-    p2 = p2[ok]
-    if p2.size == 0:
+    series = [table.vectors[1]] + ([] if residual is None else [np.asarray(residual)])
+    speed = np.asarray(table.speed, dtype=float)[1:-1]
+    p2s = []
+    for Y in series:
+        d2 = Y[2:] - 2 * Y[1:-1] + Y[:-2]
+        p2s.append((np.abs(d2) ** 2).reshape(len(d2), -1))
+    ok = np.logical_and.reduce([np.isfinite(p).all(axis=1) for p in p2s])
+    p2s = [p[ok] for p in p2s]
+    speed = speed[ok]
+    if speed.size == 0:
         return float("nan")
-    n_b = max(1, min(bands, len(p2) // 20))
-    groups = np.array_split(np.arange(len(p2)), n_b)
-    level = np.array([np.median(p2[g]) for g in groups]) / (6.0 * math.log(2.0))
-    for b in range(n_b):
-        nb = [level[j] for j in (b - 1, b + 1) if 0 <= j < n_b]
-        if nb and level[b] > 2.0 * max(nb):
-            level[b] = max(nb)
-    per_row = np.concatenate([np.full(len(g), lv) for g, lv in zip(groups, level, strict=True)])
-    return float(math.sqrt(np.mean(per_row)))
+    n_b = max(1, min(bands, len(speed) // 20))
+    groups = np.array_split(np.arange(len(speed)), n_b)
+    level = np.min([[np.median(p[g]) for g in groups] for p in p2s], axis=0) / (6.0 * math.log(2.0))
+    if n_b < 3:
+        return float(math.sqrt(np.mean(np.concatenate([np.full(len(g), lv) for g, lv in zip(groups, level, strict=True)]))))
+    s_ref = float(np.max(np.abs(speed)))
+    x = np.array([np.mean(np.abs(speed[g])) for g in groups]) / s_ref
+    keep = np.ones(n_b, dtype=bool)
+    while True:
+        tiny = 1e-300 + 1e-12 * level[keep].max()
+        A = np.column_stack([np.ones(keep.sum()), x[keep]]) / np.maximum(level[keep], tiny)[:, None]
+        coef, _ = nnls(A, np.ones(keep.sum()))
+        fit = coef[0] + coef[1] * x
+        ratio = np.where(keep, level / np.maximum(fit, tiny), -np.inf)
+        worst = int(np.argmax(ratio))
+        if ratio[worst] <= 2.0 or keep.sum() - 1 <= n_b // 2:
+            break
+        keep[worst] = False
+    all_speed = np.abs(np.asarray(table.speed, dtype=float)) / s_ref
+    return float(math.sqrt(max(coef[0] + coef[1] * float(np.mean(all_speed)), 0.0)))
 
 
 #: share of the speeds (with a clear 1X) at which a backward 1X whirl means wrong probe angles
@@ -114,7 +143,7 @@ def check_whirl_direction(table: VectorTable, floor: float) -> None:
 
 def _time_major(fit: VectorFit) -> tuple[np.ndarray, np.ndarray, int]:
     """Jacobian and residual reordered row by row (re, im of each probe), rows per speed."""
-    valid = np.isfinite(fit.table.vectors[1])
+    valid = np.isfinite(fit.measured)
     n = int(valid.sum())
     r = fit.residual[valid]
     order = np.empty(2 * n, dtype=int)
@@ -435,7 +464,14 @@ def diagnose_vectors(
     base_effects = tuple(e for e in model if e != RUNOUT)
     start_model = SynchronousModel(base_effects, ip=ip, runout=RUNOUT in model)
     before = fit_vectors(table, start_model, method=method)
-    floor = vector_noise_floor(table)
+    # the start model follows the peak and the ripples: its residual's roughness is the noise's
+    floor = vector_noise_floor(table, residual=before.residual)
+    probe_floor = floor
+    if table.phase_error_rad > 0:
+        # the tracker's angle error moves every vector by |X| times it, smoothly from row to row
+        # (the roughness misses it): a floor of its own, in quadrature
+        Y = table.vectors[1]
+        floor = math.hypot(floor, table.phase_error_rad * float(np.sqrt(np.nanmean(np.abs(Y) ** 2))))
     notes = list(table.notes)
     if before.method == "transient":
         notes.append("transient model: the run simulated along the table's speed profile and order-tracked per "
@@ -445,6 +481,12 @@ def diagnose_vectors(
     current, missing, tested, rejected = before, [], [], []
     log10_alpha = min(math.log10(alpha), LOG10_P_MAX)
     remaining = [c for c in candidates if c not in current.model.names]
+    if 2 not in before.orders:
+        skip = [c for c in remaining if c in VECTOR_CANDIDATES_2X]
+        if skip:
+            notes.append(f"no 2X vectors (or no time column, or several probes without their angles): "
+                         f"{', '.join(skip)} not tested")
+            remaining = [c for c in remaining if c not in skip]
     if table.angles is None and len(table.probes) > 1:
         # runout and a second mode are the vector model's own terms, not registered effects
         skip = [c for c in remaining if c not in (RUNOUT, SECOND_MODE) and get_effect(c).name in ("support_anisotropy",)]
@@ -457,8 +499,12 @@ def diagnose_vectors(
         excess = current.rms ** 2 - floor ** 2
         best = None
         for cand in remaining:
+            trial = current.model.with_effect(cand)
+            if cand != RUNOUT and cand != SECOND_MODE and trial.kinds.get(cand) == "rotating" \
+                    and SIDE_LOAD not in trial.effects:
+                trial = trial.with_effect(SIDE_LOAD)  # its 2X is the side load's static deflection, turned
             try:
-                fit = fit_vectors(table, current.model.with_effect(cand), method=current.method, start=current)
+                fit = fit_vectors(table, trial, method=current.method, start=current)
             except (ValueError, FloatingPointError) as exc:
                 rejected.append({"effect": cand, "rule": f"cannot be fitted: {exc}"})
                 continue
@@ -499,4 +545,8 @@ def diagnose_vectors(
     amp, _ = to_phase(table.vectors[1], phase)
     if floor > 0 and np.nanmax(amp) < 3 * floor:
         notes.append("the 1X amplitude hardly rises above the noise: the critical is not excited in this run")
+    if floor > probe_floor * 1.01:
+        notes.append(f"noise floor {floor:.3g} {table.amp_unit}: the probes' {probe_floor:.3g} and the keyphasor "
+                     f"angle's error ({math.degrees(table.phase_error_rad):.2g} deg RMS, from the pulses' timing "
+                     "jitter) times the 1X amplitude")
     return VectorDiagnosis(table, before, current, missing, floor, tested, rejected, notes, phase)

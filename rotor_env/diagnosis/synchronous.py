@@ -34,6 +34,23 @@ the natural frequency beating against 1X) follow it: only the transient carries 
 ``method="auto"`` compares the two at the first fit and keeps the quasi-steady one only
 where it is within 1 % of the peak everywhere (it is faster).
 
+The transient run is the simulator's RK4 (48 steps a turn) on one grid in seconds per fit:
+where the model does not change with the speed (no gyroscopic term, no rotating effect)
+its steps are one linear recursion ``x <- Phi x + G f`` written out from the RK4 stages
+(:func:`_rk4_linear`, the same numbers to rounding), compiled, and the forcing's columns
+are evaluated once per table; otherwise the compiled kernel integrates it.
+
+2X
+--
+A table with ``_2x`` columns and a time column is fitted at 1X and 2X together (the probes
+of each order side by side).  An effect whose stiffness turns with the shaft (``asymmetry``,
+``breathing_crack``: *rotating*) is a nonlinear parameter like a structural one, carried
+by the transient run only: a crack turns a static deflection (``static_load``, the side
+load, a forcing) into 2X, which resonates where 2x the speed meets the natural frequency —
+half the critical.  A 2X forcing (``misalignment``) is linear like the unbalance.  Nothing
+of their physics is written here: the run integrates the declared columns and the tracker
+reads its 1X and 2X, as the data's tracker did.
+
 Critical speeds and damping ratios
 ----------------------------------
 The eigenvalues ``lambda`` of the linearised model at speed ``W``; a critical is a speed
@@ -46,11 +63,13 @@ The same eigenvalues, each signed by its whirl, are the branches of the Campbell
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq, least_squares
 
@@ -89,7 +108,8 @@ W_REF_DECADES = 10.0
 
 def _classify(name: str) -> str:
     """'forcing' (moment independent of the state), 'structural' (linear in the state,
-    fixed frame) — or a clear error for an effect the 1X model cannot carry."""
+    fixed frame), 'rotating' (linear in the state, its stiffness turning with the shaft: a
+    crack) — or a clear error for an effect the synchronous model cannot carry."""
     eff = get_effect(name)
     if eff.dry_friction:
         raise ValueError(f"effect {name!r} (dry friction) is non-linear: not identifiable from 1X vectors")
@@ -108,8 +128,9 @@ def _classify(name: str) -> str:
         if not np.allclose(b, 2 * a) or np.abs(np.array(cols(phi, 1.3, 0.0, 0, 0, 0, 0, 0.2))).max() > 0:
             raise ValueError(f"effect {name!r} is non-linear or also a forcing: the 1X model cannot carry it")
     if not np.allclose(lin[0], lin[1]):
-        raise ValueError(f"effect {name!r} turns with the shaft (its stiffness depends on the spin angle): "
-                         "its 1X response needs the full waveform, not a vector table")
+        # its stiffness turns with the shaft: only the transient model (the run simulated and
+        # tracked at 1X and 2X) carries it
+        return "rotating"
     return "structural"
 
 
@@ -140,7 +161,23 @@ class SynchronousModel:
 
     @property
     def structural(self) -> tuple[str, ...]:
-        return tuple(e for e in self.effects if self.kinds[e] == "structural")
+        """The nonlinear parameters' effects: fixed-frame and rotating stiffness terms."""
+        return tuple(e for e in self.effects if self.kinds[e] in ("structural", "rotating"))
+
+    @property
+    def rotating(self) -> tuple[str, ...]:
+        return tuple(e for e in self.effects if self.kinds[e] == "rotating")
+
+    def fixed_frame(self, coef: np.ndarray) -> np.ndarray:
+        """``coef`` without the rotating effects (the fixed-frame model their harmonics are
+        balanced against; its eigenvalues give the criticals)."""
+        if not self.rotating:
+            return coef
+        out = np.array(coef, dtype=float)
+        slots = self._slots()
+        for e in self.rotating:
+            out[slots[e]] = 0.0
+        return out
 
     @property
     def forcing(self) -> tuple[str, ...]:
@@ -178,8 +215,10 @@ class SynchronousModel:
         return coef
 
     def linearised(self, coef: np.ndarray, speed: float) -> tuple[np.ndarray, np.ndarray]:
-        """``A_q``, ``A_w`` (2x2, coordinates ``(u, v) = (th_y, th_x)``) at dimensionless ``speed``."""
+        """``A_q``, ``A_w`` (2x2, coordinates ``(u, v) = (th_y, th_x)``) at dimensionless ``speed``
+        (of the fixed-frame model: the rotating effects are left out)."""
         accel = compile_accel(self.layout)
+        coef = self.fixed_frame(coef)
         A_q = np.empty((2, 2))
         A_w = np.empty((2, 2))
         for j, (thx, thy) in enumerate(((0.0, 1.0), (1.0, 0.0))):
@@ -217,14 +256,21 @@ class VectorFit:
     success: bool = True
     #: (w_ref in rad/s, viscous damping c) of each extra mode
     extra_modes: tuple[tuple[float, float], ...] = ()
+    #: the orders fitted: ``predicted`` holds each order's probes side by side (1X first)
+    orders: tuple[int, ...] = (1,)
+
+    @property
+    def measured(self) -> np.ndarray:
+        """The vectors fitted, (rows, probes * orders)."""
+        return np.concatenate([self.table.vectors[n] for n in self.orders], axis=1)
 
     @property
     def residual(self) -> np.ndarray:
-        return self.table.vectors[1] - self.predicted
+        return self.measured - self.predicted
 
     @property
     def rms(self) -> float:
-        """RMS of the complex residual (per probe and row), in the table's amplitude unit."""
+        """RMS of the complex residual (per probe, order and row), in the table's amplitude unit."""
         r = self.residual
         return float(np.sqrt(np.nanmean(np.abs(r) ** 2)))
 
@@ -294,7 +340,8 @@ def _quasi_steady(model: SynchronousModel, coef_struct: np.ndarray, forcing_coef
     lin = _poly_fit(lambda w, wd: np.stack(model.linearised(coef_struct, w)), _POINTS, basis)
     forc = _poly_fit(lambda w, wd: np.column_stack([model.forcing_1x(c, w, wd) for c in forcing_coefs]),
                      _POINTS, basis) if forcing_coefs else None
-    X = np.column_stack([basis(w, wd) for w, wd in zip(W, Wdot, strict=True)]).T  # (rows, 4)
+    X = (np.column_stack([np.ones_like(W), W, W * W, Wdot]) if basis is _speed_basis
+         else np.column_stack([basis(w, wd) for w, wd in zip(W, Wdot, strict=True)]).T)  # (rows, 4)
     if lin is not None and forcing_coefs and forc is not None:
         AA = np.einsum("rb,bkij->rkij", X, lin)
         F = np.einsum("rb,bcn->rcn", X.astype(complex), forc)
@@ -324,17 +371,49 @@ class _Profile:
     phi: np.ndarray
     speed: np.ndarray
     phi_rows: np.ndarray
-    tracker: OrderTracker  #: the 1X per revolution centred on each row
+    tracker: OrderTracker  #: the orders per revolution centred on each row
+    _cache: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def step(self) -> float:
+        """The grid's step (without the stages)."""
+        if "base" in self._cache:
+            base, w_ref = self._cache["base"]
+            return base.steps().h * w_ref
+        return self.steps().h
+
+    def steps(self) -> _Steps:
+        """The RK4 steps of the kernel on this grid: the step and the spin at each step's stages."""
+        if "steps" not in self._cache and "base" in self._cache:
+            base, w_ref = self._cache["base"]
+            b = base.steps()
+            self._cache["steps"] = _Steps(b.h * w_ref, tuple((phi, W / w_ref, a / w_ref**2) for phi, W, a in b.stages))
+        if "steps" not in self._cache:
+            dt = np.diff(self.grid)
+            p0, w0 = self.phi[:-1], self.speed[:-1]
+            a = (self.speed[1:] - w0) / dt
+            half = 0.5 * dt
+            stages = ((p0, w0, a), (p0 + w0 * half + 0.5 * a * half * half, w0 + a * half, a),
+                      (p0 + w0 * dt + 0.5 * a * dt * dt, w0 + a * dt, a))
+            self._cache["steps"] = _Steps(float(np.median(dt)), stages)
+        return self._cache["steps"]
 
 
-def _profile(tau: np.ndarray, W: np.ndarray) -> _Profile:
+@dataclass(frozen=True)
+class _Steps:
+    h: float  #: the grid's step
+    stages: tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]  #: (phi, speed, accel) at t, t + h/2, t + h
+
+
+def _profile(tau: np.ndarray, W: np.ndarray, orders: tuple[int, ...] = (1,), h: float | None = None) -> _Profile:
     """The grid a :func:`_transient` run follows (it depends on the time scale only, not on
-    the model: a fit's many runs at one ``w_ref`` share it)."""
+    the model: a fit's many runs at one ``w_ref`` share it).  Any time unit: ``h`` the step
+    in it (default the model time's rule below)."""
     speed = PchipInterpolator(tau, W, extrapolate=True)
     w_max = float(W.max())
     lead = LEAD_IN_REVS * 2 * math.pi / max(float(W[0]), 1e-3)
     # RK4 and the trapezoid in phi: 48 steps a turn keep both below 1e-4 of the peak
-    h = min(0.05, 2 * math.pi / (48.0 * w_max))
+    if h is None:
+        h = min(0.05, 2 * math.pi / (48.0 * w_max))
     t0, t1 = float(tau[0]) - lead, float(tau[-1]) + 2 * math.pi / max(float(W[-1]), 1e-3)
     n_grid = (t1 + h - t0) / h
     if not n_grid <= MAX_TRANSIENT_SAMPLES:
@@ -358,26 +437,208 @@ def _profile(tau: np.ndarray, W: np.ndarray) -> _Profile:
     # offset — the model's angle must be the data's, not just differ by a constant.
     phi -= np.interp(tau[0] - math.pi / W[0], grid, phi)
     phi_rows = np.interp(tau - math.pi / W, grid, phi) + math.pi
-    return _Profile(grid, phi, Wg, phi_rows, OrderTracker(grid, phi, (1,), at=phi_rows))
+    return _Profile(grid, phi, Wg, phi_rows, OrderTracker(grid, phi, orders, at=phi_rows))
+
+
+def _scaled(base: _Profile, w_ref: float) -> _Profile:
+    """A profile in seconds seen in the model's time (``t w_ref``, speed ``/ w_ref``): the
+    angle, the rows and the tracker are the same at every ``w_ref``."""
+    prof = _Profile(base.grid * w_ref, base.phi, base.speed / w_ref, base.phi_rows, base.tracker)
+    prof._cache["base"] = (base, w_ref)
+    return prof
+
+
+@functools.cache
+def _speed_power(effect: str, ip: float) -> int | None:
+    """``p`` when the effect's columns at zero state scale as ``s^p`` for speed ``s W`` and
+    acceleration ``s^2 a`` (the unbalance: 2, a bow or a misalignment: 0), else None."""
+    rng = np.random.default_rng(1)
+    phi, W, a = rng.uniform(0, 6, 5), rng.uniform(0.2, 2, 5), rng.uniform(-0.01, 0.01, 5)
+    z = np.zeros(5)
+    cols = get_effect(effect).columns
+    ref = np.array([np.broadcast_to(v, (5,)) for v in (*cols(phi, W, a, z, z, z, z, ip)[0],
+                                                          *cols(phi, W, a, z, z, z, z, ip)[1])])
+    new = np.array([np.broadcast_to(v, (5,)) for v in (*cols(phi, 1.3 * W, 1.69 * a, z, z, z, z, ip)[0],
+                                                          *cols(phi, 1.3 * W, 1.69 * a, z, z, z, z, ip)[1])])
+    for p in (0, 1, 2, 3):
+        if np.allclose(new, ref * 1.3**p, rtol=1e-12, atol=1e-15):
+            return p
+    return None
+
+
+def _start_state(model: SynchronousModel, coef_struct: np.ndarray, c: np.ndarray, w0: float,
+                 phi0: float) -> np.ndarray:
+    """The periodic response at the constant speed ``w0`` (state ``th_x, th_y, w_x, w_y`` at
+    ``phi0``), so a run starts without an artificial transient: the forcing's orders 0, 1 and 2
+    through the fixed-frame model, then (first order in them) what the rotating effects make
+    of that response at orders 1 and 2 — a crack turns a static deflection into 2X."""
+    accel = compile_accel(model.layout)
+    A_q, A_w = model.linearised(coef_struct, w0)
+    ph = np.linspace(0.0, 2 * math.pi, 32, endpoint=False)
+    full = coef_struct + c
+    fixed = model.fixed_frame(full)
+
+    def harmonics(f: np.ndarray) -> dict[int, np.ndarray]:  # f: (len(ph), 2) -> per order, (u, v)
+        return {n: (1.0 if n == 0 else 2.0) / len(ph) * (f.T @ np.exp(-1j * n * ph)) for n in (0, 1, 2)}
+
+    def solve(n: int, F: np.ndarray) -> np.ndarray:
+        M = -(n * w0) ** 2 * np.eye(2) - A_q - 1j * n * w0 * A_w
+        return np.linalg.solve(M, F) if n else np.linalg.solve(-A_q, F.real).astype(complex)
+
+    f = np.array([accel(p, w0, 0.0, 0.0, 0.0, 0.0, 0.0, model.ip, fixed) for p in ph])
+    Q = {n: solve(n, F) for n, F in harmonics(f).items()}
+    if model.rotating:
+        q = sum(np.real(np.outer(np.exp(1j * n * ph), Qn)) for n, Qn in Q.items())
+        r = sum(np.real(np.outer(1j * n * w0 * np.exp(1j * n * ph), Qn)) for n, Qn in Q.items())
+        g = np.array([np.subtract(accel(p, w0, 0.0, qq[1], qq[0], rr[1], rr[0], model.ip, full),
+                                  accel(p, w0, 0.0, qq[1], qq[0], rr[1], rr[0], model.ip, fixed))
+                      for p, qq, rr in zip(ph, q, r, strict=True)])
+        for n, G in harmonics(g).items():
+            if n:
+                Q[n] = Q[n] + solve(n, G)
+    u = sum(Q[n] * np.exp(1j * n * phi0) for n in Q)
+    du = sum(1j * n * w0 * Q[n] * np.exp(1j * n * phi0) for n in Q)
+    return np.array([u[1].real, u[0].real, du[1].real, du[0].real])
+
+
+@njit(cache=True)
+def _linear_steps(Phi, G1, G2, G4, f1, f2, f4, x0, out, col):  # pragma: no cover - compiled
+    """``x[k+1] = Phi x[k] + G1 f1[k] + G2 f2[k] + G4 f4[k]`` from ``x[0] = x0`` (``G``: the
+    columns acting on the acceleration, (4, 2)); ``out[k, col:col + 2]`` = ``(th_y, th_x)`` of
+    ``x[k]``.  Returns the largest ``|th|`` (NaN stays NaN)."""
+    x0_, x1, x2, x3 = x0[0], x0[1], x0[2], x0[3]
+    out[0, col], out[0, col + 1] = x1, x0_
+    big = max(abs(x0_), abs(x1))
+    for k in range(f1.shape[0]):
+        a1x, a1y, a2x, a2y, a4x, a4y = f1[k, 0], f1[k, 1], f2[k, 0], f2[k, 1], f4[k, 0], f4[k, 1]
+        y0 = (Phi[0, 0] * x0_ + Phi[0, 1] * x1 + Phi[0, 2] * x2 + Phi[0, 3] * x3 + G1[0, 0] * a1x + G1[0, 1] * a1y
+              + G2[0, 0] * a2x + G2[0, 1] * a2y + G4[0, 0] * a4x + G4[0, 1] * a4y)
+        y1 = (Phi[1, 0] * x0_ + Phi[1, 1] * x1 + Phi[1, 2] * x2 + Phi[1, 3] * x3 + G1[1, 0] * a1x + G1[1, 1] * a1y
+              + G2[1, 0] * a2x + G2[1, 1] * a2y + G4[1, 0] * a4x + G4[1, 1] * a4y)
+        y2 = (Phi[2, 0] * x0_ + Phi[2, 1] * x1 + Phi[2, 2] * x2 + Phi[2, 3] * x3 + G1[2, 0] * a1x + G1[2, 1] * a1y
+              + G2[2, 0] * a2x + G2[2, 1] * a2y + G4[2, 0] * a4x + G4[2, 1] * a4y)
+        y3 = (Phi[3, 0] * x0_ + Phi[3, 1] * x1 + Phi[3, 2] * x2 + Phi[3, 3] * x3 + G1[3, 0] * a1x + G1[3, 1] * a1y
+              + G2[3, 0] * a2x + G2[3, 1] * a2y + G4[3, 0] * a4x + G4[3, 1] * a4y)
+        x0_, x1, x2, x3 = y0, y1, y2, y3
+        out[k + 1, col], out[k + 1, col + 1] = x1, x0_
+        big = max(big, abs(x0_), abs(x1))
+        if not big < 1e3:
+            return big
+    return big
+
+
+def _lti_matrix(model: SynchronousModel, coef_struct: np.ndarray) -> np.ndarray | None:
+    """The state matrix (``th_x, th_y, w_x, w_y``) of the model when it does not change with
+    the speed (no gyroscopic term, no rotating effect), else None."""
+    if model.rotating or model.ip != 0.0:
+        return None
+    A_q, A_w = model.linearised(coef_struct, 0.0)
+    B_q, B_w = model.linearised(coef_struct, 1.7)
+    if not (np.array_equal(A_q, B_q) and np.array_equal(A_w, B_w)):
+        return None
+    # (u, v) = (th_y, th_x): reorder to the kernel's (th_x, th_y)
+    swap = np.array([[0, 1], [1, 0]])
+    A = np.zeros((4, 4))
+    A[:2, 2:] = np.eye(2)
+    A[2:, :2] = swap @ A_q @ swap
+    A[2:, 2:] = swap @ A_w @ swap
+    return A
+
+
+def _forcing_series(model: SynchronousModel, c: np.ndarray, phi: np.ndarray, W: np.ndarray,
+                    a: np.ndarray) -> np.ndarray:
+    """The forcing part of the acceleration, ``(a_x, a_y)`` per point, of the coefficients ``c``
+    (forcing effects only): the effects' own columns at zero state."""
+    out = np.zeros((len(phi), 2))
+    zero = np.zeros_like(phi)
+    for e in model.forcing:
+        sl = model._slots()[e]
+        ce = c[sl]
+        if not ce.any():
+            continue
+        cy, cx = get_effect(e).columns(phi, W, a, zero, zero, zero, zero, model.ip)
+        for q, v in enumerate(ce):
+            if v:
+                out[:, 0] += v * np.broadcast_to(cx[q], phi.shape)
+                out[:, 1] += v * np.broadcast_to(cy[q], phi.shape)
+    return out
+
+
+def _stage_columns(prof: _Profile, effect: str, ip: float) -> list[list[np.ndarray]]:
+    """Per RK4 stage, per coefficient: the effect's ``(a_x, a_y)`` columns at zero state."""
+    cols = []
+    for phi, W, a in prof.steps().stages:
+        zero = np.zeros_like(phi)
+        cy, cx = get_effect(effect).columns(phi, W, a, zero, zero, zero, zero, ip)
+        cols.append([np.column_stack([np.broadcast_to(x, phi.shape), np.broadcast_to(y, phi.shape)])
+                     for x, y in zip(cx, cy, strict=True)])
+    return cols
+
+
+def _effect_forcing(prof: _Profile, model: SynchronousModel, c: np.ndarray) -> tuple[tuple[np.ndarray, ...], float]:
+    """:func:`_forcing_series` at the three RK4 stages of ``prof`` and a factor to apply to them.
+    The forcing depends on the spin only: a unit coefficient's columns are evaluated once per
+    table (at its first time scale) where they scale as a power of the time scale (the
+    unbalance as its square; :func:`_speed_power`), else once per grid."""
+    nz = np.flatnonzero(c)
+    slots = model._slots()
+    base = prof._cache.get("base")
+    owner = [e for e in model.forcing if slots[e].start <= nz[0] < slots[e].stop] if len(nz) == 1 else []
+    if owner and c[nz[0]] == 1.0 and base is not None and _speed_power(owner[0], model.ip) is not None:
+        e, q = owner[0], int(nz[0] - slots[owner[0]].start)
+        bprof, w_ref = base
+        rkey = ("ref_columns", e, model.ip)
+        if rkey not in bprof._cache:
+            bprof._cache[rkey] = (w_ref, [[np.ascontiguousarray(x) for x in stage]
+                                          for stage in _stage_columns(prof, e, model.ip)])
+        w0, cols = bprof._cache[rkey]
+        return tuple(stage[q] for stage in cols), (w0 / w_ref) ** _speed_power(e, model.ip)
+    key = ("forcing", model.forcing, model.ip, c.tobytes())
+    if key not in prof._cache:
+        prof._cache[key] = tuple(_forcing_series(model, c, *stage) for stage in prof.steps().stages)
+    return prof._cache[key], 1.0
+
+
+def _rk4_linear(A: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The simulator's RK4 step on ``x' = A x + f`` written out: ``x+ = Phi x + G1 f1 + G2 f2 + G4 f4``
+    (``f2``: the forcing at the half step, taken by stages 2 and 3)."""
+    hA = h * A
+    eye = np.eye(4)
+    hA2 = hA @ hA
+    hA3 = hA2 @ hA
+    Phi = eye + hA + hA2 / 2 + hA3 / 6 + hA3 @ hA / 24
+    G1 = h / 6 * (eye + hA + hA2 / 2 + hA3 / 4)
+    G2 = h / 6 * (4 * eye + 2 * hA + hA2 / 2)
+    G4 = h / 6 * eye
+    return Phi, G1, G2, G4
 
 
 def _transient(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: list[np.ndarray],
-               tau: np.ndarray, W: np.ndarray, *, coast_down: bool, profile: _Profile | None = None) -> np.ndarray:
-    """Basis responses (rows, 2, n_basis): the model run along the speed profile, tracked per
-    revolution (``profile``: :func:`_profile` of ``tau, W``, when the caller keeps it)."""
-    prof = _profile(tau, W) if profile is None else profile
+               tau: np.ndarray, W: np.ndarray, *, coast_down: bool, profile: _Profile | None = None,
+               orders: tuple[int, ...] = (1,)) -> np.ndarray:
+    """Basis responses (rows, 2 * len(orders), n_basis): the model run along the speed profile,
+    tracked per revolution at each order, ``(u, v)`` per order (``profile``: :func:`_profile`
+    of ``tau, W`` with these orders, when the caller keeps it)."""
+    prof = _profile(tau, W, orders) if profile is None else profile
     grid, phi, Wg = prof.grid, prof.phi, prof.speed
     accel = compile_accel(model.layout)
-    out = np.empty((len(tau), 2, len(forcing_coefs)), dtype=complex)
+    out = np.empty((len(tau), 2 * len(orders), len(forcing_coefs)), dtype=complex)
     sims = np.empty((len(grid), 2 * len(forcing_coefs)))
-    buf = np.empty((len(grid), 10))
-    # start on the steady-state response at the first speed: no artificial transient
-    steady0 = _steady_rows(model, coef_struct, forcing_coefs, np.array([Wg[0]]), np.array([0.0]))[0]
+    A = _lti_matrix(model, coef_struct)
+    if A is not None:
+        # the same RK4 steps as the compiled kernel, as one linear recursion: the forcing at
+        # every step's stages at once (numpy), then x <- Phi x + g (no acceleration calls)
+        Phi, G1, G2, G4 = _rk4_linear(A, prof.step())
+        Gs = [np.ascontiguousarray(G[:, 2:]) for G in (G1, G2, G4)]
     for j, c in enumerate(forcing_coefs):
-        Q0 = steady0[:, j]
-        e = np.exp(1j * phi[0])
-        state = np.array([np.real(Q0[1] * e), np.real(Q0[0] * e),
-                          np.real(1j * Wg[0] * Q0[1] * e), np.real(1j * Wg[0] * Q0[0] * e)])
+        # start on the steady-state response at the first speed: no artificial transient
+        state = _start_state(model, coef_struct, c, float(Wg[0]), float(phi[0]))
+        if A is not None:
+            (f1, f2, f4), k = _effect_forcing(prof, model, c)
+            if not _linear_steps(Phi, k * Gs[0], k * Gs[1], k * Gs[2], f1, f2, f4, state, sims, 2 * j) < 1e3:
+                raise FloatingPointError("the synchronous model diverged (unstable parameters)")  # the kernel's bound
+            continue
+        buf = np.empty((len(grid), 10))
         buf[0, 4], buf[0, 5] = state[0], state[1]
         done = call_integrate_profile(accel, state, grid, phi, Wg, model.ip, coef_struct + c, 0.0, 1, buf)
         if done < len(grid):
@@ -387,25 +648,44 @@ def _transient(model: SynchronousModel, coef_struct: np.ndarray, forcing_coefs: 
     track = prof.tracker.track(sims)
     if len(track.t) != len(tau):  # pragma: no cover - the grid covers every row by construction
         raise RuntimeError("order tracking lost rows")
-    vec = track.vectors[1]
-    for j in range(len(forcing_coefs)):
-        out[:, 0, j] = vec[:, 2 * j]
-        out[:, 1, j] = vec[:, 2 * j + 1]
+    for k, n in enumerate(orders):
+        vec = track.vectors[n]
+        out[:, 2 * k, :] = vec[:, 0::2]
+        out[:, 2 * k + 1, :] = vec[:, 1::2]
     del coast_down
     return out
+
+
+def vector_orders(table: VectorTable) -> tuple[int, ...]:
+    """The orders a fit reads: 1X, and 2X where the table has it, a time column (only the
+    transient model carries 2X) and the probes' angles (or one probe)."""
+    Y2 = table.vectors.get(2)
+    if (Y2 is None or table.t is None or not np.isfinite(Y2).any()
+            or (table.angles is None and len(table.probes) > 1)):
+        return (1,)
+    return (1, 2)
 
 
 class _Problem:
     """The variable-projection least-squares problem of one model on one table."""
 
-    def __init__(self, model: SynchronousModel, table: VectorTable, method: str) -> None:
+    def __init__(self, model: SynchronousModel, table: VectorTable, method: str,
+                 orders: tuple[int, ...] | None = None) -> None:
         self.model, self.table = model, table
-        self.Y = table.vectors[1]
+        self.orders = vector_orders(table) if orders is None else tuple(orders)
+        if model.rotating and method != "transient":
+            raise ValueError(f"{', '.join(model.rotating)} turns with the shaft: only the transient model (a table "
+                             "with a time column) carries it")
+        # probes of each order side by side: (rows, probes * orders)
+        self.Y = np.concatenate([table.vectors[n] for n in self.orders], axis=1)
         self.valid = np.isfinite(self.Y)
         self.P = vector_probe_matrix(table)
         self.method = method
         #: w_ref -> the transient runs' grid at that time scale (the Jacobian's columns share it)
         self._profiles: dict[float, _Profile] = {}
+        self._base: _Profile | None = None
+        self._memo: dict[tuple[bytes, str], np.ndarray] = {}
+        self._mode_memo: dict[tuple, np.ndarray] = {}
         scale = np.nanmax(np.abs(self.Y))
         self.scale = float(scale) if scale > 0 else 1.0
         slots = model._slots()
@@ -438,9 +718,20 @@ class _Problem:
         return [(math.exp(x[j + 2 * m]), float(x[j + 2 * m + 1])) for m in range(self.n_extra)]
 
     def basis_vectors(self, x: np.ndarray, method: str | None = None) -> np.ndarray:
-        """(rows, probes, n_lin) complex basis of the linear parameters."""
-        w_ref, st = self.unpack(x)
+        """(rows, probes, n_lin) complex basis of the linear parameters (the last few kept: the
+        Jacobian's columns of the linear parameters, and the final checks, ask for the same ``x``)."""
         method = method or self.method
+        key = (np.asarray(x, dtype=float).tobytes(), method)
+        hit = self._memo.get(key)
+        if hit is None:
+            hit = self._basis_vectors(np.asarray(x, dtype=float), method)
+            if len(self._memo) >= 3:
+                self._memo.pop(next(iter(self._memo)))
+            self._memo[key] = hit
+        return hit.copy()
+
+    def _basis_vectors(self, x: np.ndarray, method: str) -> np.ndarray:
+        w_ref, st = self.unpack(x)
         own = [(e, q) for e, q in self.basis if e != SECOND_MODE]
         B = self._mode_basis(self.model, self.model.coef_vector(st), own, w_ref, method)
         for w2, c2 in self.extra_modes(x):
@@ -448,17 +739,32 @@ class _Problem:
             B2 = self._mode_basis(iso, iso.coef_vector({"viscous_damping": np.array([c2])}),
                                   [("unbalance", 0), ("unbalance", 1)], w2, method)
             B = np.concatenate([B, B2], axis=2)
-        probes = np.einsum("pc,rcn->rpn", self.P, B)
+        probes = np.concatenate([np.einsum("pc,rcn->rpn", self.P, B[:, 2 * k : 2 * k + 2])
+                                 for k in range(len(self.orders))], axis=1)
         if self.model.runout:
             n_p = len(self.table.probes)
-            R = np.zeros((len(self.table.speed), n_p, n_p), dtype=complex)
+            # a 1X vector per probe (the probe track's runout): the 1X columns only
+            R = np.zeros((len(self.table.speed), probes.shape[1], n_p), dtype=complex)
             for p in range(n_p):
                 R[:, p, p] = 1.0
             probes = np.concatenate([probes, R], axis=2)
         return probes
 
     def _mode_basis(self, model: SynchronousModel, coef: np.ndarray, basis, w_ref: float, method: str) -> np.ndarray:
-        """(rows, 2, n) responses of one mode to each unit forcing coefficient."""
+        """(rows, 2, n) responses of one mode to each unit forcing coefficient (the last few kept:
+        a difference step in one mode's parameters leaves the other mode's runs as they were)."""
+        key = (model.effects, model.ip, model.runout, model.modes, np.asarray(coef, dtype=float).tobytes(),
+               tuple(basis), float(w_ref), method)
+        hit = self._mode_memo.get(key)
+        if hit is None:
+            hit = self._mode_basis_run(model, coef, basis, w_ref, method)
+            if len(self._mode_memo) >= 6:
+                self._mode_memo.pop(next(iter(self._mode_memo)))
+            self._mode_memo[key] = hit
+        return hit
+
+    def _mode_basis_run(self, model: SynchronousModel, coef: np.ndarray, basis, w_ref: float,
+                        method: str) -> np.ndarray:
         fc = []
         for e, q in basis:
             c = np.zeros_like(coef)
@@ -466,7 +772,7 @@ class _Problem:
             fc.append(c)
         W = self.table.speed / w_ref
         if not fc:
-            return np.empty((len(W), 2, 0), dtype=complex)
+            return np.empty((len(W), 2 * len(self.orders), 0), dtype=complex)
         if method == "transient":
             # time from the first row: a table may carry absolute time stamps (1.7e9 s), whose
             # last digits a dimensionless grid of 0.05 would not resolve
@@ -475,8 +781,16 @@ class _Problem:
             if prof is None:
                 if len(self._profiles) >= 4:  # a fit moves w_ref: keep the latest few
                     self._profiles.pop(next(iter(self._profiles)))
-                prof = self._profiles[w_ref] = _profile(tau, W)
-            return _transient(model, coef, fc, tau, W, coast_down=self.coast_down, profile=prof)
+                if self._base is None:
+                    # one grid in seconds for the whole fit (its step from the first time scale):
+                    # the angle, the rows, the tracker and the forcing's columns are set up once
+                    h = min(0.05, 2 * math.pi / (48.0 * float(W.max()))) / w_ref
+                    self._base = _profile(self.table.t - self.table.t[0], self.table.speed, self.orders, h=h)
+                prof = self._profiles[w_ref] = _scaled(self._base, w_ref)
+            return _transient(model, coef, fc, tau, W, coast_down=self.coast_down, profile=prof,
+                              orders=self.orders)
+        if self.orders != (1,):
+            raise ValueError("the quasi-steady model carries 1X only")
         return _quasi_steady(model, coef, fc, W, self.Wdot_abs / w_ref**2)
 
     def expand(self, B: np.ndarray) -> np.ndarray:
@@ -626,10 +940,10 @@ def fit_vectors(
     if chosen == "transient" and start is None and prob.n_extra == 0:
         # the many starts on the cheap quasi-steady model; the transient refines the best
         # (its peak is delayed: the quasi-steady w_ref is off by a few per cent either way)
-        best_q = solve(_Problem(model, table, "quasi-steady"), starts)
+        best_q = solve(_Problem(model, table, "quasi-steady", orders=(1,)), starts)
         starts = [best_q.x + np.r_[d, np.zeros(n_struct)] for d in (0.0, -0.03, 0.03)]
     best = solve(prob, starts)
-    if method == "auto" and table.t is not None and chosen == "transient" and start is None:
+    if method == "auto" and table.t is not None and chosen == "transient" and start is None and prob.orders == (1,):
         # keep the quasi-steady model only where it is as good as the transient one
         Bt = prob.basis_vectors(best.x, "transient")
         Bq = prob.basis_vectors(best.x, "quasi-steady")
@@ -692,7 +1006,7 @@ def _finish(prob: _Problem, x: np.ndarray, success: bool) -> VectorFit:
         tp[i] += step
         J[:, i] = (full(tp) - r0) / step
     return VectorFit(prob.model, prob.table, w_ref, st, forcing, runout, pred, prob.method, -J, tuple(names),
-                     theta, bool(success), tuple(prob.extra_modes(x)))
+                     theta, bool(success), tuple(prob.extra_modes(x)), prob.orders)
 
 
 # ----------------------------------------------------------------- criticals

@@ -30,7 +30,7 @@ from .core import COLUMNS, Measurements
 from .keyphasor import KeyphasorError, pulse_edges, spin_from_pulses
 from .probes import to_model_axes
 from .rig import SPEED_UNITS, TIME_UNITS, Rig
-from .vectors import VectorTable, order_track
+from .vectors import VectorTable, keyphasor_phase_error, order_track
 
 __all__ = ["LENGTH_UNIT", "RigRecord", "WaveformError", "load_waveforms"]
 
@@ -81,7 +81,8 @@ class RigRecord:
         up = int(np.clip(math.ceil(64.0 / per_turn), 1, 4))
         tr = order_track(self.t, X, self.phi, orders, revolutions, upsample=up)
         return VectorTable(speed=tr.speed, t=tr.t, probes=names, vectors=tr.vectors, amp_unit=unit,
-                           angles=angles, source=self.source, notes=self.notes)
+                           angles=angles, source=self.source, notes=self.notes,
+                           phase_error_rad=keyphasor_phase_error(self.t, self.phi))
 
     def compensate_runout(self, runout: dict[str, complex] | None = None, below_rpm: float | None = None) -> RigRecord:
         """Subtract the probes' runout: a 1X vector per probe (``lead``), or the slow-roll
