@@ -310,7 +310,7 @@ def summary_figure(summary: dict, path: Path) -> None:
         ax.set_xlabel("recordings")
         for y, c in enumerate(counts):
             ax.text(c, y, f" {c}", va="center")
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, format="png")  # the path may be a temporary name without .png
     plt.close(fig)
 
 

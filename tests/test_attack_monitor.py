@@ -113,11 +113,13 @@ def test_cli_header_only_bad_state_name_and_resume_options(tmp_path, crack_file)
 
 def test_cli_bad_line_in_the_first_block_gives_an_error_event_and_a_summary(tmp_path, crack_file):
     lines = crack_file.read_text().splitlines(keepends=True)[:200]
-    lines[3] = "1,2,oops,4,5,6,7,8,9,10\n"
+    cells = lines[1].split(",")
+    cells[4] = "nan"  # theta_x of the first row: a validation error in the first read block
+    lines[1] = ",".join(cells)
     path = tmp_path / "bad.csv"
     path.write_text("".join(lines))
     out = _cli([str(path), "--json-lines"])
-    assert out.returncode == 2
+    assert out.returncode == 2 and "line 2, column 'theta_x'" in out.stderr
     ev = [json.loads(x) for x in out.stdout.splitlines()]
-    assert ev[-2]["event"] == "error" and ev[-2]["line"] == 4
-    assert ev[-1]["event"] == "summary"
+    assert ev[-2]["event"] == "error" and ev[-2]["line"] == 2
+    assert ev[-1]["event"] == "summary" and ev[-1]["samples"] == 0
