@@ -243,22 +243,38 @@ def _angle_error_deg(got: float, true: float, period: float) -> float:
 
 
 def crack_errors(fault: str, truth: dict, params: dict) -> dict:
-    """Size (relative) and axis (deg) errors of a named crack."""
-    if fault == "asymmetry" and "asymmetry" in params:
-        v = params["asymmetry"]["values"]
-        D, ax = v["D"], v.get("D_axis", 0.0)
+    """Size (relative) and axis (deg) errors of a named crack.  An open crack (``asymmetry``)
+    named as a ``breathing_crack`` that does not breathe is the same moment
+    (``dk/4 (z + conj(z) e^{2i phi})``: ``D = dk/4``, the weak axis 90 degrees from the stiff
+    one): its errors are given too, marked ``"as": "breathing_crack"``."""
+    if fault == "asymmetry" and ("asymmetry" in params or "breathing_crack" in params):
+        if "asymmetry" in params:
+            v = params["asymmetry"]["values"]
+            D, ax, via = v["D"], v.get("D_axis", 0.0), "asymmetry"
+        else:
+            v = params["breathing_crack"]["values"]
+            D, ax, via = v["dk_crack"] / 4.0, v.get("crack_axis", 0.0) + math.pi / 2, "breathing_crack"
         tD, tax = truth["D"], truth["D_axis"]
         # the same crack seen from its other axis: -D at 90 degrees
         if D < 0:
             D, ax = -D, ax + math.pi / 2
         if tD < 0:
             tD, tax = -tD, tax + math.pi / 2
-        return {"size_error": abs(D / tD - 1.0), "axis_error_deg": abs(_angle_error_deg(ax, tax, math.pi))}
+        return {"size_error": abs(D / tD - 1.0), "axis_error_deg": abs(_angle_error_deg(ax, tax, math.pi)),
+                "as": via}
     if fault == "breathing_crack" and "breathing_crack" in params:
         v = params["breathing_crack"]["values"]
         return {"size_error": abs(v["dk_crack"] / truth["dk_crack"] - 1.0),
-                "axis_error_deg": abs(_angle_error_deg(v.get("crack_axis", 0.0), truth["crack_axis"], 2 * math.pi))}
+                "axis_error_deg": abs(_angle_error_deg(v.get("crack_axis", 0.0), truth["crack_axis"], 2 * math.pi)),
+                "as": "breathing_crack"}
     return {}
+
+
+def _crack(o: dict) -> dict:
+    """The crack errors of an outcome, recomputed from its stored parameters."""
+    if "error" in o:
+        return {}
+    return crack_errors(o["spec"]["fault"], o["truth"]["fault"], o.get("parameters") or {})
 
 
 def run_record(spec: RecordSpec) -> dict:
@@ -304,6 +320,7 @@ def run_record(spec: RecordSpec) -> dict:
         out["right"] = f in named
     out["false_alarm"] = f in ("healthy", "runout") and bool(named)
     out["crack"] = crack_errors(f, truth["fault"], params)
+    out["candidates"] = d.get("candidates")
     return jsonable(out)
 
 
@@ -328,8 +345,9 @@ def detection_table(outcomes: list[dict]) -> str:
         clean = [o for o in ok if o["spec"]["fault"] in ("healthy", "runout")]
         noncrack = [o for o in faults if o["spec"]["fault"] not in CRACKS]
         ratios = [o["floor_ratio"] for o in ok if o.get("floor_ratio")]
-        sizes = [o["crack"]["size_error"] * 100 for o in ok if o.get("crack")]
-        axes = [o["crack"]["axis_error_deg"] for o in ok if o.get("crack")]
+        cracks = [_crack(o) for o in ok if o["right"] and o["spec"]["fault"] in CRACKS]
+        sizes = [c["size_error"] * 100 for c in cracks if c]
+        axes = [c["axis_error_deg"] for c in cracks if c]
         lines.append(
             f"| {noise:g} | {sum(o['right'] for o in faults)}/{len(faults)} "
             f"| {sum(o['false_alarm'] for o in clean)}/{len(clean)} "
@@ -364,12 +382,15 @@ def failures(outcomes: list[dict]) -> list[str]:
         if "error" in o:
             out.append(f"{head}: ERROR {o['error']}")
             continue
-        crack_bad = o.get("crack") and (o["crack"]["size_error"] > 0.05 or o["crack"]["axis_error_deg"] > 5.0)
+        cr = _crack(o)
+        crack_bad = cr and (cr["size_error"] > 0.05 or cr["axis_error_deg"] > 5.0)
         if o["right"] and not crack_bad:
             continue
         fault = {k: round(v, 5) for k, v in (o["truth"]["fault"] or {}).items()}
-        extra = (f"; crack size error {o['crack']['size_error'] * 100:.1f} %, axis {o['crack']['axis_error_deg']:.1f} deg"
-                 if o.get("crack") else "")
+        extra = (f"; crack (as {cr['as']}) size error {cr['size_error'] * 100:.1f} %, axis "
+                 f"{cr['axis_error_deg']:.1f} deg" if cr else "")
+        rej = {k: v for k, v in (o.get("rejected") or {}).items() if k == o["spec"]["fault"]}
+        extra += f"; {o['spec']['fault']} turned down: {rej[o['spec']['fault']]}" if rej else ""
         out.append(f"{head} {fault}: named {o['named'] or 'nothing'} (verdict {o['verdict']}; vectors "
                    f"{o['vectors_missing']}), floor {o['floor_ratio'] or math.nan:.2f}x{extra}")
     return out
@@ -411,7 +432,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2, help="worker processes (one BLAS thread each)")
     ap.add_argument("--out", default="rig_suite.json", help="JSON of every outcome (rewritten after each record)")
+    ap.add_argument("--report", default=None, metavar="JSON", help="print the tables of a saved run and exit")
     args = ap.parse_args(argv)
+    if args.report:
+        saved = json.loads(Path(args.report).read_text(encoding="utf-8"))
+        print(f"{saved['meta']['command']} (started {saved['meta']['started_utc']}, {saved['meta']['machine']}, "
+              f"{saved['meta']['cpus']} CPUs, {len(saved['outcomes'])} records in {saved['meta']['elapsed_s']:.0f} s)\n")
+        print(report(saved["outcomes"]))
+        return 0
     try:
         noises = tuple(float(x) for x in args.noise.split(",")) if args.noise else (
             (0.3, 1.0) if args.quick else NOISES_UM)
@@ -437,7 +465,10 @@ def main(argv: list[str] | None = None) -> int:
     outcomes: list[dict] = []
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.workers, mp_context=get_context("spawn")) as pool:
-        futures = {pool.submit(run_record, s): s for s in specs}
+        # kind by kind (every noise level of a kind together): a run cut short still has
+        # every noise level of the kinds it did
+        order = sorted(specs, key=lambda s: (KINDS.index(s.fault), s.noise_um, s.index))
+        futures = {pool.submit(run_record, s): s for s in order}
         for fut in as_completed(futures):
             o = fut.result()
             outcomes.append(o)
