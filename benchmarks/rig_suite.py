@@ -437,6 +437,7 @@ def main(argv: list[str] | None = None) -> int:
                          "(17 records of the full plan, same seeds)")
     ap.add_argument("--resume", action="store_true",
                     help="keep the outcomes already in --out (same seed) and run only the records it lacks")
+    ap.add_argument("--skip", default="", help="record indices not to run (comma-separated; e.g. run elsewhere)")
     ap.add_argument("--report", default=None, metavar="JSON", help="print the tables of a saved run and exit")
     args = ap.parse_args(argv)
     if args.report:
@@ -464,6 +465,11 @@ def main(argv: list[str] | None = None) -> int:
         # a subset of the full plan (same indices and seeds): what a loaded 2-core machine
         # diagnoses in about half an hour
         specs = [s for s in specs if s.noise_um == 0.3 or s.fault in ("asymmetry", "healthy")]
+    try:
+        skip = {int(x) for x in args.skip.split(",") if x.strip()}
+    except ValueError:
+        ap.error(f"--skip {args.skip!r}: comma-separated record indices")
+    specs = [s for s in specs if s.index not in skip]
     out_path = Path(args.out)
     done: list[dict] = []
     if args.resume and out_path.is_file():
