@@ -99,6 +99,10 @@ def _parameter_row(p: Parameter) -> str:
     if p.scanned:
         description += (f" (scanned: enters the columns non-linearly; the diagnosis tries {p.scan_points} values "
                         "spaced geometrically over the plausible range, then refines around the best)")
+    if p.orientation:
+        description += (f" (an orientation the keyphasor cannot know, period {_number(p.angle_period)} rad: fitted "
+                        "by the output-error diagnosis of measured waveforms; the equation error builds its "
+                        "columns at the default)")
     return (
         f"| `{p.name}` | {_number(p.default)} | {_cell(description)} | "
         f"{_interval(p.lower, p.upper)} | {_cell(reason)} | {_interval(*p.domain)} |"
