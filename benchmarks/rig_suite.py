@@ -202,9 +202,9 @@ def make_record(spec: RecordSpec, folder: Path) -> tuple[Path, Path, dict]:
     return the two paths and the truth."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-    from rotor_env.measurements.simulated import simulate_rig
 
     from rotor_env.measurements.rig import load_rig
+    from rotor_env.rig_simulation import simulate_rig
 
     rng = np.random.default_rng(spec.seed)
     rig_path = folder / f"rig{spec.index}.json"
