@@ -46,10 +46,9 @@ print(json.dumps({"first_s": times[0], "best_s": min(times[1:] or times), "criti
 
 
 def write_table(path: Path) -> None:
-    from rotor_env.measurements.simulated import simulate_rig
-
     from rotor_env.measurements.rig import load_rig
     from rotor_env.params import RotorParams
+    from rotor_env.rig_simulation import simulate_rig
 
     rig_path = path.with_suffix(".yaml")
     rig_path.write_text("keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n")
