@@ -82,15 +82,31 @@ def test_bash_snippet_runs(line, code, tmp_path):
 
 
 def _rotor_id_commands() -> list[tuple[int, str]]:
-    """Every ``rotor-id ...`` command of every bash block (pipes split, comments dropped)."""
+    """Every ``rotor-id ...`` command of every bash block (continued lines joined, pipes split,
+    redirections and comments dropped).  A command built from shell variables (a loop's
+    ``$1``) is a template, not a command line: it is checked with its variables replaced by a
+    plausible value of the option they fill (a number, else a file name)."""
+    import re
+
     out = []
     for line, code, _ in blocks("bash"):
-        for k, text in enumerate(code.splitlines()):
+        lines = code.splitlines()
+        k = 0
+        while k < len(lines):
+            first = k
+            text = lines[k]
+            while text.rstrip().endswith("\\") and k + 1 < len(lines):
+                k += 1
+                text = text.rstrip()[:-1] + " " + lines[k].strip()
+            k += 1
             text = text.split(" #")[0].strip()
             for part in text.split("|"):
-                part = part.strip()
+                part = re.split(r"\s\d?>>?\s", " " + part.strip() + " ")[0].strip()
                 if part.startswith("rotor-id "):
-                    out.append((line + 1 + k, part))
+                    # $((rpm + 1)) and $rpm stand for numbers; $1_$rpm.csv for a file name
+                    part = re.sub(r"\$\(\([^)]*\)\)", "1000", part)
+                    part = re.sub(r"\$\w+", "1000", part)
+                    out.append((line + 1 + first, part))
     return out
 
 

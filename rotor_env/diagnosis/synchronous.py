@@ -198,16 +198,26 @@ class SynchronousModel:
 
     # ---------------------------------------------------------- coefficient layout
     def _slots(self) -> dict[str, slice]:
+        # an effect's coefficients, then its argument parameters (an orientation, a scanned
+        # clearance) in the simulator's coefficient vector (Effect.kernel_width)
         out, j = {}, 0
         for e in smooth_effects(self.layout):
             n = len(e.coefficients)
             out[e.name] = slice(j, j + n)
-            j += n
+            j += e.kernel_width
         return out
+
+    def _argument_defaults(self, coef: np.ndarray) -> None:
+        j = 0
+        for e in smooth_effects(self.layout):
+            for q, p in enumerate(e.argument_parameters):
+                coef[j + len(e.coefficients) + q] = p.default
+            j += e.kernel_width
 
     def coef_vector(self, structural: dict[str, np.ndarray], forcing: dict[str, np.ndarray] | None = None) -> np.ndarray:
         slots = self._slots()
-        coef = np.zeros(max(s.stop for s in slots.values()))
+        coef = np.zeros(sum(e.kernel_width for e in smooth_effects(self.layout)))
+        self._argument_defaults(coef)
         coef[slots["stiffness"]] = 1.0
         for d in (structural, forcing or {}):
             for k, v in d.items():
