@@ -197,6 +197,13 @@ def diagnose_rig(
             record = replace(record, notes=(*record.notes, f"runout seen in the 1X vectors, but the run has no "
                                                           f"slow roll below {below:.0f} rpm to take it from"))
     w_ref = vd.after.w_ref
+    if abs(w_ref / vd.before.w_ref - 1.0) > 0.25:
+        # the time scale only has to be near the natural frequency (the output-error fit
+        # refines the stiffness); an added 1X effect that moved it far is not trusted with it
+        record = replace(record, notes=(*record.notes, (
+            f"time scale from the starting 1X model ({vd.before.w_ref / SPEED_UNITS['rpm']:.0f} rpm): the final "
+            f"1X model's natural frequency {w_ref / SPEED_UNITS['rpm']:.0f} rpm is far from it")))
+        w_ref = vd.before.w_ref
     step("waveforms: the output-error fit of every candidate")
     if not math.isfinite(w_ref):  # pragma: no cover - fit_vectors returns finite values
         raise RuntimeError("no natural frequency identified")

@@ -165,7 +165,8 @@ def _wald(fit: VectorFit, effect: str) -> tuple[float, float]:
     return wald_test(fit.params[idx], cov[np.ix_(idx, idx)])
 
 
-def _plausible(fit: VectorFit, effect: str) -> tuple[bool, str]:
+def _plausible(fit: VectorFit, effect: str, before: VectorFit | None = None) -> tuple[bool, str]:
+    """Whether ``fit`` (``before`` with ``effect`` added) is physically plausible."""
     if effect == RUNOUT:
         return True, ""
     if effect == SECOND_MODE:
@@ -175,6 +176,13 @@ def _plausible(fit: VectorFit, effect: str) -> tuple[bool, str]:
             return False, f"its natural frequency {w2 / SPEED_UNITS['rpm']:.0f} rpm lies outside the run"
         if abs(w2 / fit.w_ref - 1.0) < 0.05:
             return False, "it sits on the first mode (a split or a skewed peak, not another mode)"
+        if before is not None and (not 0.5 * lo <= fit.w_ref <= 1.2 * hi
+                                   or abs(fit.w_ref / before.w_ref - 1.0) > 0.25):
+            # the added mode took the first one's resonance and the first ran off (to a static
+            # compliance far outside the run): a split or skewed peak, not another mode
+            return False, (f"it takes the first mode's place (the first mode moves from "
+                           f"{before.w_ref / SPEED_UNITS['rpm']:.0f} to {fit.w_ref / SPEED_UNITS['rpm']:.0f} rpm): "
+                           "a split or a skewed peak, not another mode")
         if c2 > 0.6:
             return False, f"damping ratio {c2 / 2:.2f} above 0.3: not a resonance"
         return True, ""
@@ -510,7 +518,7 @@ def diagnose_vectors(
                 continue
             F, log10_p = _wald(fit, cand)
             gain = (current.rms ** 2 - fit.rms ** 2) / excess if excess > 0 else 0.0
-            ok, why = _plausible(fit, cand)
+            ok, why = _plausible(fit, cand, current)
             entry = {"effect": cand, "F": F, "log10_p": log10_p, "rms": fit.rms, "gain": gain,
                      "plausible": ok}
             tested.append(entry)
