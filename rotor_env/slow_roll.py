@@ -67,4 +67,4 @@ def compensate_slow_roll(meas: Measurements, speed_max: float) -> tuple[Measurem
         cy, cx = cols[key]
         d[:, cy] -= pattern.real
         d[:, cx] -= pattern.imag
-    return Measurements(d, meas.source), r
+    return Measurements(d, meas.source, meas.estimated), r

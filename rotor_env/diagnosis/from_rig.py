@@ -123,44 +123,15 @@ class RigDiagnosis(Result):
         return self.diagnosis.figures(self.w_ref / SPEED_UNITS["rpm"], "speed [rpm]")
 
     def _oe_report(self, path, head: str, overwrite: bool):
-        import base64
-        import html
-        import io
-
-        import matplotlib.pyplot as plt
-
-        from ..outputs import atomic_write_text
-
-        imgs = []
-        for name, fig in self._figures().items():
-            buf = io.BytesIO()
-            fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-            plt.close(fig)
-            imgs.append(f"<figure><img alt='{html.escape(name)}' src='data:image/png;base64,"
-                        f"{base64.b64encode(buf.getvalue()).decode()}'/></figure>")
-        body = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>rotor-id rig diagnosis</title></head>"
-                f"<body><h1>Diagnosis: {html.escape(self.verdict)}</h1>{head}"
-                f"<pre>{html.escape(self.diagnosis.summary())}</pre>{''.join(imgs)}</body></html>")
-        return atomic_write_text(path, body, overwrite=overwrite)
+        return self.diagnosis.write_report(path, head, title="rotor-id rig diagnosis", verdict=self.verdict,
+                                           overwrite=overwrite, speed_scale=self.w_ref / SPEED_UNITS["rpm"],
+                                           speed_unit="speed [rpm]")
 
     def save_figures(self, folder, *, overwrite: bool = True):
         if not isinstance(self.diagnosis, OutputErrorDiagnosis):
             return self.diagnosis.save_figures(folder, overwrite=overwrite)
-        from pathlib import Path
-
-        import matplotlib.pyplot as plt
-
-        from ..outputs import atomic_write
-
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        paths = []
-        for name, fig in self._figures().items():
-            paths.append(atomic_write(folder / f"{name}.png",
-                                      lambda p, fig=fig: fig.savefig(p, format="png", dpi=110, bbox_inches="tight"),
-                                      overwrite=overwrite))
-            plt.close(fig)
-        return paths
+        return self.diagnosis.save_figures(folder, overwrite=overwrite, speed_scale=self.w_ref / SPEED_UNITS["rpm"],
+                                           speed_unit="speed [rpm]")
 
     @property
     def verdict(self) -> str:

@@ -142,6 +142,48 @@ class OutputErrorDiagnosis:
         return {"output_error_residual": plot_residual(self, speed_scale, speed_unit),
                 "output_error_response": plot_response(self, speed_scale, speed_unit)}
 
+    def save_figures(self, folder, *, overwrite: bool = True, speed_scale: float = 1.0,
+                     speed_unit: str = "speed (model units)") -> list:
+        """Each figure of :meth:`figures` as ``NAME.png`` in ``folder`` (written atomically)."""
+        from pathlib import Path
+
+        import matplotlib.pyplot as plt
+
+        from ..outputs import atomic_write
+
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        paths = []
+        for name, fig in self.figures(speed_scale, speed_unit).items():
+            paths.append(atomic_write(folder / f"{name}.png",
+                                      lambda p, fig=fig: fig.savefig(p, format="png", dpi=110, bbox_inches="tight"),
+                                      overwrite=overwrite))
+            plt.close(fig)
+        return paths
+
+    def write_report(self, path, head: str, *, title: str, verdict: str | None = None, extra_text: str | None = None,
+                     overwrite: bool = False, speed_scale: float = 1.0, speed_unit: str = "speed (model units)"):
+        """One HTML page: the verdict, ``head`` (HTML), the summary and the figures inline."""
+        import base64
+        import html
+        import io
+
+        import matplotlib.pyplot as plt
+
+        from ..outputs import atomic_write_text
+
+        imgs = []
+        for name, fig in self.figures(speed_scale, speed_unit).items():
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+            plt.close(fig)
+            imgs.append(f"<figure><img alt='{html.escape(name)}' src='data:image/png;base64,"
+                        f"{base64.b64encode(buf.getvalue()).decode()}'/></figure>")
+        body = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title></head>"
+                f"<body><h1>Diagnosis: {html.escape(verdict or self.verdict)}</h1>{head}"
+                f"<pre>{html.escape(extra_text or self.summary())}</pre>{''.join(imgs)}</body></html>")
+        return atomic_write_text(path, body, overwrite=overwrite)
+
     def to_dict(self) -> dict:
         # residual and floor as the probes see them: the analysis band's RMS scaled to the
         # probes' bandwidth (white noise), so that a model that explains the data reads ~1x

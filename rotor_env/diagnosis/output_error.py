@@ -86,6 +86,7 @@ __all__ = [
     "equation_error_start",
     "fit_output_error",
     "library_effects",
+    "noise_ar1_high_band",
     "noise_std_high_band",
     "start_from",
 ]
@@ -383,8 +384,11 @@ class ShootingGrid:
 
     @classmethod
     def from_arrays(cls, t, phi, phid, th_x, th_y, ip: float, *, noise_std: float | None = None,
-                    segment_length: float = SEGMENT_LENGTH, grid_dt: float | None = None) -> ShootingGrid:
-        """Decimate (zero-phase FIR) to the grid step and cut the segments."""
+                    noise_rho: float = 0.0, segment_length: float = SEGMENT_LENGTH,
+                    grid_dt: float | None = None) -> ShootingGrid:
+        """Decimate (zero-phase FIR) to the grid step and cut the segments.  ``noise_std``: the
+        noise's standard deviation per sample of the input, ``noise_rho`` its lag-one
+        correlation (AR(1); 0: white)."""
         from scipy.signal import resample_poly, savgol_filter
 
         t = np.asarray(t, float)
@@ -420,8 +424,16 @@ class ShootingGrid:
         # each sample in one segment: a segment ends one sample before the next one starts
         ends = np.append(starts[1:] - 1, len(t) - 1)
         seg = np.column_stack([starts, ends]).astype(np.int64)
-        # white noise through the decimating FIR: its variance times the sum of squared taps
-        gain = 1.0 if taps is None else float(np.sum(taps * taps))
+        # AR(1) noise through the decimating FIR: its variance times sum_ij h_i h_j rho^|i-j|
+        # (white: the sum of squared taps)
+        if taps is None:
+            gain = 1.0
+        elif noise_rho == 0.0:
+            gain = float(np.sum(taps * taps))
+        else:
+            acf = np.correlate(taps, taps, mode="full")
+            lags = np.abs(np.arange(-(len(taps) - 1), len(taps)))
+            gain = float(np.sum(acf * float(noise_rho) ** lags))
         sigma = None if noise_std is None else float(noise_std) * math.sqrt(gain)
         # RK4's phase error over a segment, omega T (omega dt)^4 / 120 relative at the top
         # speed's 1X, kept below a third of the noise-to-response ratio
@@ -788,6 +800,47 @@ def equation_error_start(grid: ShootingGrid, effects: Sequence[str]) -> dict[str
 
 
 # ------------------------------------------------------------------ the probes' noise
+def noise_ar1_high_band(x: np.ndarray, dt: float, f_signal: float) -> tuple[float, float]:
+    """``(std, rho)`` of first-order autoregressive sensor noise from the band above the signal.
+
+    Coloured noise (an integrating sensor, a filtered channel, a random walk of the
+    quantiser) is an AR(1) process ``n_k = rho n_{k-1} + e_k``: its one-sided density is
+    ``2 dt var(e) / |1 - rho exp(-i w)|^2`` with ``w = 2 pi f dt``, so the shape of Welch's
+    periodogram over ``(1.5 f_signal, 0.9 Nyquist)`` gives ``rho`` (least squares of the log
+    density over a grid of ``rho``, the level by the median ratio: a few spikes do not lift
+    it) and its level ``var(e)``.  Returned: the noise's marginal standard deviation
+    ``sqrt(var(e) / (1 - rho^2))`` and ``rho``.  White noise gives ``rho`` near 0 and the
+    level of :func:`noise_std_high_band`; where the band is too narrow to read a shape, that
+    function's white estimate with ``rho = 0``.
+    """
+    from scipy.signal import welch
+
+    x = np.asarray(x, float)
+    x = x - np.mean(x)
+    fs = 1.0 / dt
+    nyq = 0.5 * fs
+    lo = 1.5 * f_signal
+    if lo < 0.6 * nyq and len(x) >= 512:
+        nper = int(min(4096, 2 ** math.floor(math.log2(len(x) / 8))))
+        f, p = welch(x, fs=fs, nperseg=nper, detrend="linear")
+        band = (f > lo) & (f < 0.9 * nyq) & (p > 0)
+        if band.sum() >= 16:
+            w = 2 * math.pi * f[band] * dt
+            lp = np.log(p[band])
+            best = (math.inf, 0.0, 0.0)
+            for rho in np.linspace(-0.9, 0.98, 189):
+                lg = -np.log(1.0 - 2.0 * rho * np.cos(w) + rho * rho)
+                level = float(np.median(lp - lg))
+                loss = float(np.sum((lp - lg - level) ** 2))
+                if loss < best[0]:
+                    best = (loss, float(rho), level)
+            _, rho, level = best
+            # Welch's averaged periodogram: its median is ~its mean (chi^2 of many degrees of freedom)
+            var_e = math.exp(level) * nyq
+            return math.sqrt(var_e / (1.0 - rho * rho)), rho
+    return noise_std_high_band(x, dt, f_signal), 0.0
+
+
 def noise_std_high_band(x: np.ndarray, dt: float, f_signal: float) -> float:
     """Standard deviation of white sensor noise from the band above the signal.
 

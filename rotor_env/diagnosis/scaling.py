@@ -166,4 +166,4 @@ def rescale_time(meas: Measurements, k: float) -> Measurements:
     d[:, 3] /= k          # phi_ddot
     d[:, 6:8] /= s        # theta rates
     d[:, 8:10] /= k       # theta accelerations
-    return Measurements(d, meas.source)
+    return Measurements(d, meas.source, meas.estimated)

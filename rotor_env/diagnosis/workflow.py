@@ -112,6 +112,7 @@ def diagnose(
     samples = np.ascontiguousarray(measurements.data)
     for e in (*model, *candidates):
         validate_columns(EFFECTS[e], samples, 0.3 if ip is None else float(ip))
+    in_file_time = measurements  # the output-error path reads the time scale off its own fit
     try:
         check_excitation(measurements)
         k_hat = estimate_ip_and_stiffness(measurements, model.effects, widest=False).k
@@ -157,6 +158,16 @@ def diagnose(
         data.ip_uncertainty = 1.96 * ip_se if ip is None else 0.0
     except NotIdentifiable as exc:
         return NotIdentifiableResult(source=measurements.source, reason=str(exc), ip=ip, notes=notes)
+    from .from_angles import diagnose_angles, needs_output_error
+    from .output_error import library_effects
+
+    if needs_output_error(measurements) and all(e in library_effects() for e in model.effects):
+        # accelerations differentiated from noisy angles: the equation error is noise, the
+        # decisions are taken on the output error (from_angles' docstring)
+        return diagnose_angles(in_file_time, model.effects, candidates, ip=ip, alpha=alpha,
+                               notes=[n for n in notes if not n.startswith(("ip estimated from the data",
+                                                                             "time rescaled by"))],
+                               progress=progress)
     from ..progress import bar
 
     step("fitting the starting model")

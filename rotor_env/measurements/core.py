@@ -33,14 +33,17 @@ class Measurements:
     Columns read as attributes (``meas.theta_x``) or items (``meas["theta_x"]``).
     """
 
-    __slots__ = ("data", "source")
+    __slots__ = ("data", "estimated", "source")
 
-    def __init__(self, data: np.ndarray, source: str | None = None) -> None:
+    def __init__(self, data: np.ndarray, source: str | None = None, estimated: tuple[str, ...] = ()) -> None:
         data = np.asarray(data, dtype=float)
         if data.ndim != 2 or data.shape[1] != len(COLUMNS):
             raise ValueError(f"measurements must have shape (m, {len(COLUMNS)}), got {data.shape}")
         self.data = data
         self.source = source
+        #: the columns estimated from others (rates and accelerations differentiated from the
+        #: angles): the diagnosis decides on the output error when those angles are noisy
+        self.estimated = tuple(estimated)
 
     def __len__(self) -> int:
         return self.data.shape[0]
@@ -68,7 +71,7 @@ class Measurements:
             mask &= t >= t_start
         if t_stop is not None:
             mask &= t <= t_stop
-        return Measurements(self.data[mask], self.source)
+        return Measurements(self.data[mask], self.source, self.estimated)
 
     def with_noise(self, std: float | Mapping[str, float], seed: int | None = None) -> Measurements:
         """A copy with independent Gaussian noise (per channel std), reproducible by ``seed``."""
@@ -87,7 +90,7 @@ class Measurements:
             if s > 0:
                 j = COLUMNS.index(name)
                 out[:, j] += rng.normal(0.0, s, size=len(out))
-        return Measurements(out, self.source)
+        return Measurements(out, self.source, self.estimated)
 
     def to_file(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
         """Write CSV (or Parquet if the name ends in ``.parquet``); never overwrites silently.

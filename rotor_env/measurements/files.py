@@ -292,7 +292,7 @@ def load_measurements(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> M
     if derived:
         notes.append(f"estimated: {', '.join(derived)}")
     note = f" ({'; '.join(notes)})" if notes else ""
-    return Measurements(out, source=f"{path}{note}")
+    return Measurements(out, source=f"{path}{note}", estimated=tuple(derived))
 
 
 #: a measurement cell beyond this is no measurement: squares and products of it overflow
