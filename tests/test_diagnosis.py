@@ -199,10 +199,8 @@ def test_angles_only_input(tmp_path):
     """Only t, phi, theta_x, theta_y in the file: rates and accelerations are derived.
 
     Angle noise of std 1e-5 (an encoder-grade sensor): the Savitzky-Golay second
-    derivative amplifies it about 500-fold (accelerations carry ~5e-3 of noise, ten
-    times the noise of the measured-channel tests), which still leaves the hidden
-    asymmetry plain.  Some noise is also what the F-tests assume: with exact angles the
-    residual is the deterministic differentiation error, not white noise.
+    derivative amplifies it about 500-fold (accelerations carry ~5e-3 of noise), so the
+    record is decided on the output error, fitted to the angles themselves.
     """
     true = simulate(JEFFCOTT.replace(D=0.03))
     rng = np.random.default_rng(7)
@@ -214,8 +212,12 @@ def test_angles_only_input(tmp_path):
     assert "estimated" in meas.source
     res = diagnose(meas, ip=0.3)
     assert res.missing == ["asymmetry"], res.summary()
-    assert _rel(res.after.physical["D"], 0.03) < 0.05
-    assert res.after.fit_percent > res.before.fit_percent
+    # noisy angles with estimated rates are decided on the output error (issue 24 item 2;
+    # tests/test_angles_output_error.py): the same claims on its fit
+    oe = res.diagnosis
+    D = oe.after.parameters("asymmetry")["D"]
+    assert _rel(abs(D), 0.03) < 0.05
+    assert oe.after.rms < oe.before.rms
 
 
 # ---------------------------------------------------------------- user effects
