@@ -122,3 +122,27 @@ def test_every_readme_command_line_parses(line, command, capsys):
     except SystemExit as exc:
         if exc.code:
             pytest.fail(f"README.md line {line}: {command!r} does not parse: {capsys.readouterr().err[-500:]}")
+
+
+def test_readme_commands_run_in_order_in_one_folder():
+    """A newcomer runs the README's blocks in order in one folder: no command may refuse an
+    output that an earlier command wrote (``rotor-id`` never overwrites without ``--force``).
+    Measured from a fresh clone (docs/README_MEASURED.md): the rig monitor example's
+    ``simulate run.csv`` failed on the ``run.csv`` of the block before it, and the monitor then
+    read the wrong file."""
+    import shlex
+
+    from rotor_env.cli import build_parser
+
+    written: dict[str, int] = {}
+    clashes = []
+    for line, command in _rotor_id_commands():
+        args = build_parser().parse_args(shlex.split(command)[1:])
+        outputs = [getattr(args, "out", None) if args.command == "simulate" else None,
+                   getattr(args, "report", None), getattr(args, "figures", None)]
+        for out in filter(None, outputs):
+            if out in written and not getattr(args, "force", False):
+                clashes.append(f"README.md line {line}: {command!r} writes {out}, already written at line "
+                               f"{written[out]}, without --force")
+            written.setdefault(out, line)
+    assert not clashes, "\n".join(clashes)
