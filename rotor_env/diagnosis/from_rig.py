@@ -86,13 +86,18 @@ class RigDiagnosis(Result):
                                            "amplitude_unit", "method", "physical", "unbalance")},
             "notes": [*d.get("notes", []), *self.record.notes],
         })
+        if isinstance(self.diagnosis, OutputErrorDiagnosis):
+            byvec = self.named_by_vectors
+            d.update({"verdict": self.verdict, "missing": self.missing, "named_by_vectors": byvec})
+            d["notes"] += [f"{e}: named by the 1X vectors; the waveforms' fit is at its floor without it (its "
+                           "response there is absorbed by the runout term, the unbalance and the segments' start "
+                           "states): they neither confirm nor refute it" for e in byvec]
         return d
 
     def summary(self) -> str:
         lines = [f"rig recording {self.record.source} ({self.record.rig.model}, "
                  f"{self.record.rpm.min():.0f}-{self.record.rpm.max():.0f} rpm)",
-                 f"VERDICT: {self.verdict}" + (f" -- missing: {', '.join(self.diagnosis.missing)}"
-                                               if self.diagnosis.missing else "")
+                 f"VERDICT: {self.verdict}" + (f" -- missing: {', '.join(self.missing)}" if self.missing else "")
                  + " (one conclusion for the record: the waveforms' model holds every sample; the 1X "
                  "vectors below are a part of it)"]
         for c in self.vectors.to_dict()["criticals"]:
@@ -134,8 +139,33 @@ class RigDiagnosis(Result):
                                            speed_unit="speed [rpm]")
 
     @property
+    def named_by_vectors(self) -> list[str]:
+        """Library effects the 1X vectors name that the waveforms' output-error fit leaves
+        undecided: its residual already at the floor, so it neither confirms nor refutes them.
+
+        A shaft bow is the case in point: its response ``b / (1 - W^2 + i c W)`` is the
+        runout nuisance ``b`` plus an unbalance ``b W^2 / (...)`` plus a term ``-i c W b / (...)``
+        that lives only at the critical, at the natural frequency, where the segments' free
+        start states absorb it.  The vectors, averaged per revolution and fitted without free
+        states, see that term; the record's conclusion takes their word for it."""
+        from .oe_diagnosis import EXPLAINED_RATIO
+        from .output_error import library_effects
+
+        d = self.diagnosis
+        if not isinstance(d, OutputErrorDiagnosis) or d.rms_ratio_after > EXPLAINED_RATIO:
+            return []
+        lib = library_effects()
+        return [e for e in self.vectors.missing if e in lib and e not in d.missing]
+
+    @property
+    def missing(self) -> list[str]:
+        """The record's missing effects: the waveforms', then those only the 1X vectors decide."""
+        return [*self.diagnosis.missing, *self.named_by_vectors]
+
+    @property
     def verdict(self) -> str:
-        return self.diagnosis.verdict
+        v = self.diagnosis.verdict
+        return "explained_after_adding" if v == "explained" and self.named_by_vectors else v
 
 
 def diagnose_rig(
