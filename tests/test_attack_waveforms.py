@@ -76,3 +76,52 @@ def test_implausible_waveforms_are_refused(run, case, says):
     assert str(path) in str(exc.value) and says in str(exc.value)
     if case == "one_sample_1e200":
         assert "line 1236" in str(exc.value)
+
+
+def _drop_pulses(kp: np.ndarray, which: slice) -> np.ndarray:
+    """The keyphasor signal with the pulses ``which`` (of all its pulses) taken out."""
+    kp = kp.copy()
+    pulse = kp < 0.5 * (kp.min() + kp.max())  # the simulated rig's notch: a brief dip
+    if pulse.mean() > 0.5:
+        pulse = ~pulse
+    starts = np.flatnonzero(~pulse[:-1] & pulse[1:]) + 1
+    ends = np.flatnonzero(pulse[:-1] & ~pulse[1:]) + 1
+    base = float(np.median(kp[~pulse]))
+    for s in starts[which]:
+        later = ends[ends > s]
+        kp[s : later[0] if later.size else len(kp)] = base
+    return kp
+
+
+@pytest.mark.parametrize(("which", "says"), [
+    (slice(1, None, 2), "vibrate at twice the keyphasor's rate"),  # 1214 rpm top, criticals halved before
+    (slice(56, None, 2), "every other pulse missing"),  # from pulse 56 on: a step the neighbours half saw
+])
+def test_every_other_keyphasor_pulse_missing_is_refused(run, which, says):
+    """Item 7: a regular train at half the shaft's rate was read as a rotor at half the speed."""
+    folder, cols = run
+    path = _write(folder, cols, name="half_pulses.csv", kp=_drop_pulses(cols["kp"], which))
+    with pytest.raises(WaveformError) as exc:
+        load_waveforms(path, _rig(folder, ONE_PLANE))
+    message = str(exc.value)
+    assert str(path) in message and "column 'kp'" in message and says in message and "line" in message
+
+
+def test_the_streaming_tracker_refuses_a_step_to_half_the_pulse_rate(run):
+    """The monitor's keyphasor (chunk by chunk) runs the same check: the samples before the
+    step go out, the error names the line where the rate halves."""
+    from rotor_env.measurements.keyphasor import KeyphasorError, KeyphasorTracker
+
+    _, cols = run
+    kp = _drop_pulses(cols["kp"], slice(56, None, 2))
+    tracker = KeyphasorTracker(where="kp")
+    handed_out = 0
+    lines = np.arange(len(kp)) + 2
+    with pytest.raises(KeyphasorError, match="every other pulse missing") as exc:
+        for lo in range(0, len(kp), 1000):
+            sl = slice(lo, lo + 1000)
+            handed_out += len(tracker.push(cols["t"][sl], kp[sl], cols["x"][sl], lines[sl])[0])
+        handed_out += len(tracker.finish()[0])
+    assert exc.value.line is not None and handed_out > 0
+    t_line = cols["t"][exc.value.line - 2]  # the step is near pulse 56 of ~113 in a 4.5 s run
+    assert 1.5 < t_line < 3.5
