@@ -23,7 +23,8 @@ def test_seeded_mutations_give_no_traceback_hang_or_silent_nan():
 
 
 def test_the_fuzzer_catches_a_traceback_and_a_silent_nan(tmp_path, monkeypatch):
-    """The oracle itself: a reader that raises TypeError, or hands out NaN, is a failure."""
+    """The oracle itself: a reader that raises TypeError, hands out NaN, or refuses in numpy's
+    words, is a failure."""
     import numpy as np
 
     def raises(path, full):
@@ -32,9 +33,14 @@ def test_the_fuzzer_catches_a_traceback_and_a_silent_nan(tmp_path, monkeypatch):
     def nan(path, full):
         attack_fuzz._finite(np.array([1.0, np.nan]), "a column")
 
+    def numpy_words(path, full):
+        raise np.linalg.LinAlgError(f"{path}: SVD did not converge")  # a ValueError, named, but numpy's words
+
     monkeypatch.setitem(attack_fuzz.TARGETS, "rig", (".yaml", raises))
     monkeypatch.setitem(attack_fuzz.TARGETS, "table", (".csv", nan))
-    out = attack_fuzz.run(2, seed=1, kinds=("rig", "table"))
+    monkeypatch.setitem(attack_fuzz.TARGETS, "stream", (".csv", numpy_words))
+    out = attack_fuzz.run(2, seed=1, kinds=("rig", "table", "stream"))
     whys = [f["why"] for f in out["failures"]]
-    assert len(whys) == 4
+    assert len(whys) == 6
     assert any("TypeError" in w for w in whys) and any("silent non-finite" in w for w in whys)
+    assert sum("unclear refusal" in w and "SVD" in w for w in whys) == 2

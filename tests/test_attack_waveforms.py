@@ -51,7 +51,9 @@ def test_the_plain_run_loads(run):
 @pytest.mark.parametrize(("case", "says"), [
     ("um_as_m", "beyond a displacement probe's range"),  # 88 m orbits before
     ("one_sample_1e200", "beyond a displacement probe's range"),  # a hang before
+    ("all_probes_1e300", "beyond a displacement probe's range"),  # a hang before
     ("time_in_ms", "units.time"),  # criticals at 1.65 rpm before
+    ("time_in_us", "units.time"),
     ("rig_ms_data_s", "units.time"),  # 1.65 M rpm before
     ("slow_roll_above_run", "slow_roll_rpm"),  # shaft_bow instead of the crack before
 ])
@@ -64,8 +66,10 @@ def test_implausible_waveforms_are_refused(run, case, says):
         x = cols["x"].copy()
         x[1234] = 1e200
         change = {"x": x}
-    elif case == "time_in_ms":
-        change = {"t": cols["t"] * 1000.0}
+    elif case == "all_probes_1e300":
+        change = {"x": cols["x"] * 1e300, "y": cols["y"] * 1e300}
+    elif case in ("time_in_ms", "time_in_us"):
+        change = {"t": cols["t"] * (1e3 if case == "time_in_ms" else 1e6)}
     elif case == "rig_ms_data_s":
         rig_text = ONE_PLANE.replace("{displacement: um}", "{displacement: um, time: ms}")
     else:
@@ -125,3 +129,13 @@ def test_the_streaming_tracker_refuses_a_step_to_half_the_pulse_rate(run):
     assert exc.value.line is not None and handed_out > 0
     t_line = cols["t"][exc.value.line - 2]  # the step is near pulse 56 of ~113 in a 4.5 s run
     assert 1.5 < t_line < 3.5
+
+
+def test_a_duplicated_probe_column_is_refused(run):
+    """Item 7: two columns named x: the last was read silently (the crack's probe missed)."""
+    folder, cols = run
+    path = _write(folder, cols, name="dup.csv")
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join([lines[0] + ",x", *(f"{r},{r.split(',')[2]}" for r in lines[1:])]) + "\n")
+    with pytest.raises(WaveformError, match=r"dup\.csv: column\(s\) \['x'\] appear more than once"):
+        load_waveforms(path, _rig(folder, ONE_PLANE))

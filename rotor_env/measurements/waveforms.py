@@ -180,7 +180,12 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
         header, data, lines = read_table(path)
     except MeasurementError as exc:
         raise WaveformError(str(exc)) from None
-    col = {h.strip(): i for i, h in enumerate(header)}
+    names = [h.strip() for h in header]
+    dup = sorted({h for h in names if names.count(h) > 1})
+    if dup:
+        # one of two same-named columns would be read silently (the last: a crack's probe missed)
+        raise WaveformError(f"{path}: column(s) {str(dup)[:200]} appear more than once in the header")
+    col = {h: i for i, h in enumerate(names)}
     needed = [rig.time, *(p.name for p in rig.probes), rig.keyphasor or rig.speed]
     missing = [c for c in needed if c not in col]
     if missing:
