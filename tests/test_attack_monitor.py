@@ -247,3 +247,66 @@ def test_ctrl_c_inside_an_update_keeps_every_sample(crack_file, monkeypatch):
     assert (b["samples"], b["t"], b["alarms"], b["counted_blocks"]) == (a["samples"], a["t"], a["alarms"],
                                                                          a["counted_blocks"])
     assert a["alarms"] == 1 and b["events"] == a["events"]
+
+
+@pytest.mark.parametrize("option", [["--model", "unbalance"], ["--ip", "0.2"], ["--forgetting", "0.999"],
+                                    ["--window", "2000"], ["--arl0", "1000"], ["--block", "100"]])
+def test_resume_refuses_each_option_it_would_ignore(tmp_path, crack_file, capsys, option):
+    """Item 4: --resume ignored --model, --forgetting, --window, --arl0, --block silently."""
+    from rotor_env.cli import main
+
+    state = Monitor().save(tmp_path / "s.npz")
+    assert main(["monitor", str(crack_file), "--json-lines", "--resume", str(state), *option]) == 2
+    out = capsys.readouterr()
+    assert f"{option[0]} cannot change them" in out.err and out.out == ""
+
+
+def test_cli_bad_line_after_the_alarm_keeps_it_and_names_the_line(tmp_path, crack_file):
+    """Item 4 through the command: the error event names the bad line (15004 for 14001
+    before) and the summary keeps the alarm raised before it in the same read block."""
+    lines = crack_file.read_text().splitlines(keepends=True)
+    k = 14000  # t = 280: after the alarm (t 250-256)
+    cells = lines[k].split(",")
+    cells[0] = repr(float(cells[0]) - 1.0)  # a time going backwards
+    lines[k] = ",".join(cells)
+    path = tmp_path / "bad.csv"
+    path.write_text("".join(lines))
+    out = _cli([str(path), "--json-lines"])
+    assert out.returncode == 2 and f"line {k + 1}," in out.stderr
+    ev = [json.loads(x) for x in out.stdout.splitlines()]
+    assert ev[-2]["event"] == "error" and ev[-2]["line"] == k + 1
+    assert ev[-1]["event"] == "summary" and ev[-1]["alarms"] == 1 and ev[-1]["samples"] == k - 1
+    assert [e["event"] for e in ev].count("changed") + [e["event"] for e in ev].count("appeared") == 1
+
+
+def _peak_rss_mb(args) -> tuple[int, float]:
+    """Exit code and peak resident memory (MB) of ``rotor-id ARGS`` in a child process."""
+    code = ("import resource, sys\nfrom rotor_env.cli import main\ntry:\n    rc = main(sys.argv[1:])\nfinally:\n"
+            "    print('RSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\nsys.exit(rc)")
+    out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=300)
+    rss = [line for line in out.stderr.splitlines() if line.startswith("RSS ")]
+    return out.returncode, int(rss[-1].split()[1]) / 1024.0  # Linux: kB
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="ru_maxrss in kB")
+def test_a_100_mb_line_is_refused_without_reading_it_whole(tmp_path, crack_file):
+    """Items 5 and 8: a 100 MB line gave a _csv.Error and no summary, after 950 MB of RSS.
+    Now: an error event naming its line, a summary of the rows before, and the memory of
+    a plain run within 100 MB."""
+    head = "".join(crack_file.read_text().splitlines(keepends=True)[:2001])
+    plain, long = tmp_path / "plain.csv", tmp_path / "long.csv"
+    plain.write_text(head)
+    with open(long, "w") as fh:
+        fh.write(head)
+        block = "1" * (1 << 20)
+        for _ in range(100):
+            fh.write(block)
+        fh.write("\n")
+    rc_plain, rss_plain = _peak_rss_mb(["monitor", str(plain), "--json-lines"])
+    rc_long, rss_long = _peak_rss_mb(["monitor", str(long), "--json-lines"])
+    assert (rc_plain, rc_long) == (0, 2)
+    assert rss_long - rss_plain < 100, (rss_plain, rss_long)
+    out = _cli([str(long), "--json-lines"])
+    ev = [json.loads(x) for x in out.stdout.splitlines()]
+    assert ev[-2]["event"] == "error" and ev[-2]["line"] == 2002 and "longer than" in ev[-2]["message"]
+    assert ev[-1]["event"] == "summary" and ev[-1]["samples"] == 2000
