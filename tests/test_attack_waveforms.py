@@ -139,3 +139,20 @@ def test_a_duplicated_probe_column_is_refused(run):
     path.write_text("\n".join([lines[0] + ",x", *(f"{r},{r.split(',')[2]}" for r in lines[1:])]) + "\n")
     with pytest.raises(WaveformError, match=r"dup\.csv: column\(s\) \['x'\] appear more than once"):
         load_waveforms(path, _rig(folder, ONE_PLANE))
+
+
+def test_the_monitor_refuses_a_keyphasor_at_half_the_shaft_rate(run):
+    """The rig stream (``rotor-id monitor --rig``) runs the half-rate check on the revolutions
+    its DC gap is learned from; the same run with all its pulses streams through."""
+    from rotor_env.measurements.files import MeasurementError
+    from rotor_env.monitor.rig_stream import RigStream
+
+    folder, cols = run
+    rig = _rig(folder, ONE_PLANE)
+    good = _write(folder, cols, name="stream_good.csv")
+    assert sum(chunk.shape[0] for chunk in RigStream(good, rig, 1650.0)) > 1000
+    half = _write(folder, cols, name="stream_half.csv", kp=_drop_pulses(cols["kp"], slice(1, None, 2)))
+    with pytest.raises(MeasurementError, match="vibrate at twice the keyphasor's rate") as exc:
+        for _ in RigStream(half, rig, 1650.0):
+            pass
+    assert str(half) in str(exc.value) and exc.value.line is not None
