@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from .outputs import atomic_write
-from .ray_cluster import init_ray
+from .ray_cluster import init_ray, stop_ray
 
 __all__ = [
     "Recording",
@@ -427,7 +427,7 @@ def _run_on_ray(todo, options, workers, address, out, rec_dir, progress, say) ->
         return _collect(ds.iter_rows(), len(todo), out, rec_dir, bool(options.get("reports")), progress, say)
     finally:
         if started:
-            ray.shutdown()
+            stop_ray()
 
 
 def _collect(rows, total: int, out: Path, rec_dir: Path, reports: bool, progress, say) -> dict:

@@ -125,3 +125,47 @@ def test_two_probe_table_without_rig_is_diagnosed(tmp_path):
     crit = min(result.after.criticals, key=lambda c: abs(c["rpm"] - 1650))
     assert crit["rpm"] == pytest.approx(1650.0, rel=0.01)
     assert math.isfinite(result.after.rms)
+
+
+#: numpy's own words, which tell a user nothing about the file (item 8)
+RAW_NUMPY = ("SVD did not converge", "cannot reshape array", "cannot convert float NaN to integer", "np.float64(",
+             "Traceback")
+
+
+@pytest.mark.parametrize("case", ["constant_rpm", "header_only", "one_row", "nan_amplitude", "amplitude_1e-300"])
+def test_cli_degenerate_tables_are_one_line_errors(tmp_path, capsys, case):
+    """Items 5 and 8: a constant speed (OverflowError before), no rows, one row, NaN
+    amplitudes, amplitudes of 1e-300 um (a TypeError in the summary before): exit 2 with
+    one line naming the file, never numpy's words."""
+    path = _table(tmp_path / "good.csv")
+    lines = path.read_text().splitlines()
+    cells = [row.split(",") for row in lines[1:]]
+    if case == "constant_rpm":
+        cells = [[c[0], "1000.0", *c[2:]] for c in cells]
+    elif case == "header_only":
+        cells = []
+    elif case == "one_row":
+        cells = cells[:1]
+    elif case == "nan_amplitude":
+        cells = [[*c[:2], "nan", c[3], "nan", c[5]] for c in cells]
+    else:
+        cells = [[*c[:2], repr(float(c[2]) * 1e-300), c[3], repr(float(c[4]) * 1e-300), c[5]] for c in cells]
+    bad = tmp_path / f"{case}.csv"
+    bad.write_text("\n".join([lines[0], *(",".join(c) for c in cells)]) + "\n")
+    assert main(["diagnose", str(bad), "--vectors"]) == 2
+    err = capsys.readouterr().err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("rotor-id diagnose: error: ") and str(bad) in last and len(last) < 600
+    assert not any(w in err for w in RAW_NUMPY), err[-1500:]
+
+
+def test_summary_of_a_fit_with_no_noise_floor(tmp_path):
+    """A noise floor of zero (noise-free data) has no ratio: the summary says so (a
+    TypeError formatting None before)."""
+    from dataclasses import replace
+
+    from rotor_env.cli import diagnose_file
+
+    result = diagnose_file(_table(tmp_path / "table.csv", time=False, rows=40), vectors=True)
+    text = replace(result, noise_floor=0.0).summary()
+    assert "no ratio to the noise floor" in text and "final model" in text

@@ -123,3 +123,190 @@ def test_cli_bad_line_in_the_first_block_gives_an_error_event_and_a_summary(tmp_
     ev = [json.loads(x) for x in out.stdout.splitlines()]
     assert ev[-2]["event"] == "error" and ev[-2]["line"] == 2
     assert ev[-1]["event"] == "summary" and ev[-1]["samples"] == 0
+
+
+@pytest.fixture(scope="module")
+def long_crack_file(tmp_path_factory):
+    """The crack example sampled ten times finer (150 001 rows): a second or more of work
+    (blocks of 200 samples span 0.4 time units here: no alarm)."""
+    meas = with_crack(0.03, 0.04, rotor="table1", dt=0.002)
+    path = tmp_path_factory.mktemp("mon_long") / "run.csv"
+    type(meas)(meas.data, None).to_file(path)
+    return path
+
+
+_INTERRUPTIBLE = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+                  "from rotor_env.cli import main; sys.exit(main(sys.argv[1:]))")
+
+
+@pytest.mark.parametrize("reader", ["drained", "blocked"])
+def test_ctrl_c_on_a_busy_monitor_summarises_what_its_state_holds(tmp_path, long_crack_file, reader):
+    """Item 4, end to end: Ctrl-C in the middle of the work ('drained': just after the first
+    status line, mostly while the monitor processes a chunk; 'blocked': while its writes
+    wait on a full pipe).  Every line is whole and the summary is on its own; the saved
+    state holds exactly the samples the summary counts (processed up to its t, the rest
+    waiting), and resuming it on the rows after them gives the uninterrupted run's result.
+    Where the signal lands is up to the clock: the deterministic case is
+    test_ctrl_c_inside_an_update_keeps_every_sample."""
+    import fcntl
+    import signal
+    import termios
+    import time
+
+    from rotor_env.monitor import Monitor, StreamReader
+
+    state = tmp_path / "state.npz"
+    proc = subprocess.Popen([sys.executable, "-c", _INTERRUPTIBLE, "monitor", str(long_crack_file), "--json-lines",
+                             "--state", str(state), "--status-every", "20" if reader == "drained" else "0.01"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        if reader == "drained":
+            first = proc.stdout.readline()
+            time.sleep(0.05)  # most of the time goes into the monitor's steps
+        else:  # the pipe full (64 KiB): the monitor waits in a write
+            first = b""
+            deadline = time.monotonic() + 90
+            while time.monotonic() < deadline and proc.poll() is None:
+                n = fcntl.ioctl(proc.stdout.fileno(), termios.FIONREAD, b"\0\0\0\0")
+                if int.from_bytes(n, sys.byteorder) >= 60000:
+                    break
+                time.sleep(0.02)
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err[-2000:]
+    lines = (first + out).decode().splitlines()
+    events = [json.loads(x) for x in lines]  # a cut line would not parse
+    summary = events[-1]
+    assert summary["event"] == "summary" and all(e["event"] != "summary" for e in events[:-1])
+    assert summary["samples"] < 150001  # it was interrupted
+
+    saved = Monitor.load(state)
+    assert (saved.samples, saved.t) == (summary["samples"], summary["t"])
+    t_file = np.loadtxt(long_crack_file, delimiter=",", skiprows=1, usecols=0)
+    processed = int(np.count_nonzero(t_file <= summary["t"] + 1e-9)) if summary["t"] > 0 else 0
+    assert processed + summary["unprocessed_samples"] == summary["samples"]  # none lost
+    assert summary["t_received"] == pytest.approx(t_file[summary["samples"] - 1])
+
+    # resumed on the rows after the ones it holds, it ends where an uninterrupted run ends
+    whole = Monitor(saved.config)
+    for chunk in StreamReader(long_crack_file):
+        whole.update(chunk)
+    for chunk in StreamReader(long_crack_file):
+        rest = chunk[chunk[:, 0] > summary["t_received"]]
+        if rest.shape[0]:
+            saved.update(rest)
+    a, b = whole.summary(), saved.summary()
+    assert (b["samples"], b["t"], b["alarms"], b["counted_blocks"]) == (a["samples"], a["t"], a["alarms"],
+                                                                         a["counted_blocks"])
+    assert b["events"] == a["events"]
+    for name, coef in a["coefficients"].items():
+        assert b["coefficients"][name] == pytest.approx(coef, rel=1e-9, abs=1e-15)
+
+
+def test_ctrl_c_inside_an_update_keeps_every_sample(crack_file, monkeypatch):
+    """Item 4, deterministic: SIGINT arrives while ``Monitor.update`` works through a chunk
+    (after its third step).  It stops at the end of that step; every sample is processed or
+    waits (main: the samples of the chunk were counted but neither processed nor kept, so a
+    saved state dropped them), and going on gives the uninterrupted result."""
+    import os
+    import signal
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        data = np.concatenate(list(StreamReader(crack_file)))
+        whole = Monitor(status_every=10.0)
+        whole.update(data)
+
+        mon = Monitor(status_every=10.0)
+        original = Monitor._process
+        calls = []
+
+        def interrupted_in_third_step(self, rows):
+            calls.append(rows.shape[0])
+            out = original(self, rows)
+            if len(calls) == 3:
+                os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C now, in the middle of update
+            return out
+
+        monkeypatch.setattr(Monitor, "_process", interrupted_in_third_step)
+        with pytest.raises(KeyboardInterrupt):
+            mon.update(data)
+        monkeypatch.setattr(Monitor, "_process", original)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    summary = mon.summary()
+    assert len(calls) == 3 and summary["samples"] == data.shape[0]
+    processed = int(np.count_nonzero(data[:, 0] <= summary["t"]))
+    assert processed == sum(calls) and processed + summary["unprocessed_samples"] == data.shape[0]
+    mon.update(np.zeros((0, data.shape[1])))  # the waiting samples go on
+    a, b = whole.summary(), mon.summary()
+    assert (b["samples"], b["t"], b["alarms"], b["counted_blocks"]) == (a["samples"], a["t"], a["alarms"],
+                                                                         a["counted_blocks"])
+    assert a["alarms"] == 1 and b["events"] == a["events"]
+
+
+@pytest.mark.parametrize("option", [["--model", "unbalance"], ["--ip", "0.2"], ["--forgetting", "0.999"],
+                                    ["--window", "2000"], ["--arl0", "1000"], ["--block", "100"]])
+def test_resume_refuses_each_option_it_would_ignore(tmp_path, crack_file, capsys, option):
+    """Item 4: --resume ignored --model, --forgetting, --window, --arl0, --block silently."""
+    from rotor_env.cli import main
+
+    state = Monitor().save(tmp_path / "s.npz")
+    assert main(["monitor", str(crack_file), "--json-lines", "--resume", str(state), *option]) == 2
+    out = capsys.readouterr()
+    assert f"{option[0]} cannot change them" in out.err and out.out == ""
+
+
+def test_cli_bad_line_after_the_alarm_keeps_it_and_names_the_line(tmp_path, crack_file):
+    """Item 4 through the command: the error event names the bad line (15004 for 14001
+    before) and the summary keeps the alarm raised before it in the same read block."""
+    lines = crack_file.read_text().splitlines(keepends=True)
+    k = 14000  # t = 280: after the alarm (t 250-256)
+    cells = lines[k].split(",")
+    cells[0] = repr(float(cells[0]) - 1.0)  # a time going backwards
+    lines[k] = ",".join(cells)
+    path = tmp_path / "bad.csv"
+    path.write_text("".join(lines))
+    out = _cli([str(path), "--json-lines"])
+    assert out.returncode == 2 and f"line {k + 1}," in out.stderr
+    ev = [json.loads(x) for x in out.stdout.splitlines()]
+    assert ev[-2]["event"] == "error" and ev[-2]["line"] == k + 1
+    assert ev[-1]["event"] == "summary" and ev[-1]["alarms"] == 1 and ev[-1]["samples"] == k - 1
+    assert [e["event"] for e in ev].count("changed") + [e["event"] for e in ev].count("appeared") == 1
+
+
+def _peak_rss_mb(args) -> tuple[int, float]:
+    """Exit code and peak resident memory (MB) of ``rotor-id ARGS`` in a child process."""
+    code = ("import resource, sys\nfrom rotor_env.cli import main\ntry:\n    rc = main(sys.argv[1:])\nfinally:\n"
+            "    print('RSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\nsys.exit(rc)")
+    out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=300)
+    rss = [line for line in out.stderr.splitlines() if line.startswith("RSS ")]
+    return out.returncode, int(rss[-1].split()[1]) / 1024.0  # Linux: kB
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="ru_maxrss in kB")
+def test_a_100_mb_line_is_refused_without_reading_it_whole(tmp_path, crack_file):
+    """Items 5 and 8: a 100 MB line gave a _csv.Error and no summary, after 950 MB of RSS.
+    Now: an error event naming its line, a summary of the rows before, and the memory of
+    a plain run within 100 MB."""
+    head = "".join(crack_file.read_text().splitlines(keepends=True)[:2001])
+    plain, long = tmp_path / "plain.csv", tmp_path / "long.csv"
+    plain.write_text(head)
+    with open(long, "w") as fh:
+        fh.write(head)
+        block = "1" * (1 << 20)
+        for _ in range(100):
+            fh.write(block)
+        fh.write("\n")
+    rc_plain, rss_plain = _peak_rss_mb(["monitor", str(plain), "--json-lines"])
+    rc_long, rss_long = _peak_rss_mb(["monitor", str(long), "--json-lines"])
+    assert (rc_plain, rc_long) == (0, 2)
+    assert rss_long - rss_plain < 100, (rss_plain, rss_long)
+    out = _cli([str(long), "--json-lines"])
+    ev = [json.loads(x) for x in out.stdout.splitlines()]
+    assert ev[-2]["event"] == "error" and ev[-2]["line"] == 2002 and "longer than" in ev[-2]["message"]
+    assert ev[-1]["event"] == "summary" and ev[-1]["samples"] == 2000

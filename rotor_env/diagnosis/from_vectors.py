@@ -302,11 +302,11 @@ class VectorDiagnosis(Result):
         for c in d["criticals"]:
             lines.append(f"critical speed {c['rpm']:.1f} rpm, damping ratio {c['damping_ratio']:.4f}")
         lines.append(f"start model ({', '.join(self.before.model.names)}): residual RMS {self.before.rms:.4g} {u} "
-                     f"({d['rms_ratio_before']:.3g}x the noise floor {self.noise_floor:.3g} {u})")
+                     f"({_times(d['rms_ratio_before'])} the noise floor {self.noise_floor:.3g} {u})")
         for m in self.missing:
             lines.append(f"+ {m}: {_cause(m)}")
         lines.append(f"final model ({', '.join(self.after.model.names)}): residual RMS {self.after.rms:.4g} {u} "
-                     f"({d['rms_ratio_after']:.3g}x the floor)")
+                     f"({_times(d['rms_ratio_after'])} the floor)")
         lines.append(f"verdict: {self.verdict}")
         for b in d["unexplained"]:
             lines.append(f"  not explained at {b['rpm_from']:.0f}-{b['rpm_to']:.0f} rpm (RMS {b['rms']:.3g} {u})")
@@ -445,6 +445,11 @@ class VectorDiagnosis(Result):
 
 def _unit_label(unit: str) -> str:
     return "µm" if unit == "um" else unit
+
+
+def _times(ratio: float | None) -> str:
+    """``3.2x`` of a ratio to the noise floor; a floor of zero (noise-free data) has none."""
+    return f"{ratio:.3g}x" if ratio is not None else "no ratio to"
 
 
 def _cause(name: str) -> str:

@@ -19,6 +19,14 @@ Checks (a clear error naming the file, column, time and line): too few pulses; a
 revolution twice as long as its neighbours say (a missed pulse) or half as long (a
 double trigger, noise): its period times the speed its neighbours' line predicts,
 over 2 pi, outside [0.6, 1.6] (a start from rest, whose periods shrink fast, passes).
+A train that starts missing every other pulse (or comes back) is a step in the pulse rate
+that the two-sided neighbours half see: each revolution is also set against the line
+through the three before it (a speed linear in time, a constant acceleration from or to
+rest included, is extrapolated exactly), outside the same [0.6, 1.6] an error naming it.
+A train that misses every other pulse all through is regular, at half the shaft's rate:
+the periods cannot show it, the probes do (:func:`check_once_per_turn`): the shaft's own
+once-per-turn vibration (unbalance, runout, always there) then comes out at order 2 of
+the pulses' angle and their order 1 holds nothing but noise.
 """
 
 from __future__ import annotations
@@ -29,7 +37,8 @@ from collections.abc import Callable
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-__all__ = ["KeyphasorError", "KeyphasorTracker", "check_periods", "pulse_edges", "spin_from_pulses"]
+__all__ = ["KeyphasorError", "KeyphasorTracker", "check_once_per_turn", "check_periods", "order_amplitudes",
+           "pulse_edges", "spin_from_pulses"]
 
 MIN_PULSES = 5
 #: a revolution this much longer (shorter) than its neighbours is a missed (extra) pulse
@@ -64,6 +73,21 @@ def period_ratio(edges: np.ndarray, i: int) -> float | None:
     return float(period[i] * predicted / (2.0 * math.pi)) if predicted > 0 else math.inf
 
 
+def period_ratio_before(edges: np.ndarray, i: int) -> float | None:
+    """Revolution ``i`` against the three before it: its period times the speed the line
+    through their speeds predicts at its middle, over 2 pi (``None``: fewer than three before).
+    A step of the pulse rate by two (pulses from then on every other turn) is 2, a return 0.5."""
+    if i < 3:
+        return None
+    nb = np.arange(i - 3, i)
+    period = np.diff(edges[i - 3 : i + 2])
+    speed = 2.0 * math.pi / period[:3]
+    mid = 0.5 * (edges[nb + 1] + edges[nb])
+    slope, icept = np.polyfit(mid, speed, 1)
+    predicted = slope * 0.5 * (edges[i] + edges[i + 1]) + icept
+    return float(period[3] * predicted / (2.0 * math.pi)) if predicted > 0 else math.inf
+
+
 def check_periods(edges: np.ndarray, revolutions, threshold: float, *, where: str,
                   line_of: Callable[[int], int] | None = None, first_pulse: int = 0) -> None:
     """The missing/extra-pulse check of :func:`pulse_edges` (and :class:`KeyphasorTracker`):
@@ -72,16 +96,22 @@ def check_periods(edges: np.ndarray, revolutions, threshold: float, *, where: st
     the first sample after its leading edge.  ``first_pulse``: the number in the record of
     ``edges[0]`` (a tracker holds a window of the edges)."""
     for i in revolutions:
-        ratio = period_ratio(edges, i)
+        ratio, against = period_ratio(edges, i), "its neighbours"
         if ratio is None or PERIOD_RATIO[0] <= ratio <= PERIOD_RATIO[1]:
-            continue
-        kind = "missing pulse" if ratio > 1 else "extra pulse (double trigger or noise)"
+            # both sides fit (or too few): a step in the pulse rate shows against the side before
+            ratio, against = period_ratio_before(edges, i), "the three revolutions before it"
+            if ratio is None or PERIOD_RATIO[0] <= ratio <= PERIOD_RATIO[1]:
+                continue
+            kind = ("pulses from here at half the shaft's rate: every other pulse missing" if ratio > 1
+                    else "pulses from here at twice the rate: extra pulses (double trigger or noise)")
+        else:
+            kind = "missing pulse" if ratio > 1 else "extra pulse (double trigger or noise)"
         line = f", line {line_of(i)}" if line_of is not None else ""
         period = edges[i + 1] - edges[i]
         n = first_pulse + i
         exc = KeyphasorError(
             f"{where}{line}: irregular pulses at t = {edges[i]:.6g}: a revolution of {period:.4g} between "
-            f"pulses {n + 1} and {n + 2}, {ratio:.2f}x its neighbours ({kind}); check the threshold "
+            f"pulses {n + 1} and {n + 2}, {ratio:.2f}x {against} ({kind}); check the threshold "
             f"(now {threshold:g}) or the keyphasor signal"
         )
         exc.line = line_of(i) if line_of is not None else None
@@ -113,6 +143,55 @@ def pulse_edges(t: np.ndarray, signal: np.ndarray, threshold: float | None = Non
     check_periods(edges, range(len(edges) - 1), thr, where=where,
                   line_of=(lambda i: int(lines[k[i] + 1])) if lines is not None else None)
     return edges
+
+
+#: the probes' order-1 amplitude (median over revolutions) below this share of their order-2
+#: one: no once-per-turn vibration at the pulses' rate, the pulses come every other turn
+#: (a real rotor's unbalance keeps its 1X well above a fifth of its 2X, even a misaligned one's)
+MIN_ORDER1_SHARE = 0.2
+
+
+def order_amplitudes(phi: np.ndarray, signal: np.ndarray, orders: tuple[int, ...] = (1, 2)) -> np.ndarray:
+    """Amplitude of each order of ``signal`` per whole revolution of ``phi`` (rows: revolutions,
+    columns: ``orders``): the mean over the revolution's samples of ``x e^{-i k phi}``, times 2,
+    the revolution's mean removed first (a probe's gap)."""
+    turn = np.floor((phi - phi[0]) / (2.0 * math.pi)).astype(np.int64)
+    full = turn < turn[-1]  # the last sample starts a revolution it does not finish
+    turn, ph, x = turn[full], phi[full], np.asarray(signal, dtype=float)[full]
+    if not turn.size:
+        return np.zeros((0, len(orders)))
+    count = np.bincount(turn)
+    ok = count > 0
+    x = x - (np.bincount(turn, x) / np.maximum(count, 1))[turn]
+    out = np.empty((int(ok.sum()), len(orders)))
+    for j, k in enumerate(orders):
+        re = np.bincount(turn, x * np.cos(k * ph))[ok]
+        im = np.bincount(turn, x * np.sin(k * ph))[ok]
+        out[:, j] = 2.0 * np.hypot(re, im) / count[ok]
+    return out
+
+
+def check_once_per_turn(phi: np.ndarray, signals: dict[str, np.ndarray], *, where: str,
+                        lines: np.ndarray | None = None) -> None:
+    """Refuse a pulse train at half the shaft's rate (see the module docstring): the probes
+    together (``signals``: name -> reading at the samples of ``phi``) show a median order-1
+    amplitude below :data:`MIN_ORDER1_SHARE` of their order-2 one.  ``lines``: the file line
+    of each sample (named in the error)."""
+    a1 = a2 = 0.0
+    for x in signals.values():
+        amp = order_amplitudes(phi, x)
+        if amp.shape[0] < MIN_PULSES:
+            return
+        a1 += float(np.median(amp[:, 0]))
+        a2 += float(np.median(amp[:, 1]))
+    if not a2 > 0 or a1 >= MIN_ORDER1_SHARE * a2:
+        return
+    span = f", lines {int(lines[0])}-{int(lines[-1])}" if lines is not None and len(lines) else ""
+    raise KeyphasorError(
+        f"{where}{span}: the probes ({', '.join(signals)}) vibrate at twice the keyphasor's rate all through the "
+        f"run: their 1X is {a1 / a2:.2f} of their 2X (a shaft's once-per-turn vibration is at least "
+        f"{MIN_ORDER1_SHARE:g}): pulses at half the shaft's rate, every other pulse missing? Check the keyphasor "
+        "signal and its threshold (the speeds would come out halved)")
 
 
 def spin_from_pulses(t: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

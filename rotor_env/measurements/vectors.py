@@ -66,6 +66,9 @@ SPEED_UNITS: dict[str, float] = {"rpm": 2.0 * math.pi / 60.0, "rad/s": 1.0, "hz"
 MAX_RPM = 1e6
 #: a 1X amplitude beyond this is beyond any displacement probe's range (metres)
 MAX_AMPLITUDE_M = 0.025
+#: a 1X amplitude below this (metres) all through a table is below any displacement probe's
+#: resolution: no vibration was measured (or not in the unit given)
+MIN_AMPLITUDE_M = 1e-9
 #: a table whose run spans more revolutions than this is not one start-up (time in ms?);
 #: the transient model's grid is 48 samples a revolution
 MAX_REVOLUTIONS = 5e4
@@ -523,6 +526,11 @@ def load_vector_table(
     amps = data[:, [pair[0] for v in probes.values() for pair in v.values()]]
     if not (amps > 0).any():
         raise VectorTableError(f"{path}: every amplitude is zero: the table holds no vibration to diagnose")
+    if float(amps.max()) * metres < MIN_AMPLITUDE_M:
+        # 1e-300 um: no probe resolves it, and the fit's noise floor underflows
+        raise VectorTableError(f"{path}: the largest amplitude is {_num(amps.max())} {amp_unit}, below any displacement "
+                               f"probe's resolution ({MIN_AMPLITUDE_M * 1e9:g} nm): no vibration measured; is "
+                               "--amp-unit right?")
     phases = data[:, [pair[1] for v in probes.values() for pair in v.values()]]
     if np.all(np.abs(phases) <= 2 * math.pi + 1e-9) and float(np.ptp(phases)) > 1.0:
         # degrees that never leave ±6.3 over a run (and across probes mounted apart) are radians

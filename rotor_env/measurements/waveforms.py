@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .core import COLUMNS, Measurements
-from .keyphasor import KeyphasorError, pulse_edges, spin_from_pulses
+from .keyphasor import KeyphasorError, check_once_per_turn, pulse_edges, spin_from_pulses
 from .probes import to_model_axes
 from .rig import SPEED_UNITS, TIME_UNITS, Rig
 from .vectors import VectorTable, keyphasor_phase_error, order_track
@@ -180,7 +180,12 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
         header, data, lines = read_table(path)
     except MeasurementError as exc:
         raise WaveformError(str(exc)) from None
-    col = {h.strip(): i for i, h in enumerate(header)}
+    names = [h.strip() for h in header]
+    dup = sorted({h for h in names if names.count(h) > 1})
+    if dup:
+        # one of two same-named columns would be read silently (the last: a crack's probe missed)
+        raise WaveformError(f"{path}: column(s) {str(dup)[:200]} appear more than once in the header")
+    col = {h: i for i, h in enumerate(names)}
     needed = [rig.time, *(p.name for p in rig.probes), rig.keyphasor or rig.speed]
     missing = [c for c in needed if c not in col]
     if missing:
@@ -224,6 +229,11 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
         if per_turn < 8:
             raise WaveformError(f"{path}: only {per_turn:.1f} samples per revolution at the top speed: sample faster")
         inside, phi, speed, accel = spin_from_pulses(t, edges)
+        try:  # a regular train at half the shaft's rate: only the probes show it
+            check_once_per_turn(phi, {p.name: data[inside, col[p.name]] for p in rig.probes},
+                                where=f"{path}, column {rig.keyphasor!r}", lines=lines[inside])
+        except KeyphasorError as exc:
+            raise WaveformError(str(exc)) from None
     else:
         speed_all = data[:, col[rig.speed]] * SPEED_UNITS[rig.speed_unit]
         inside = np.ones(len(t), dtype=bool)

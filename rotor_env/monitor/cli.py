@@ -80,7 +80,7 @@ def _config(args, dt: float, *, ip: float = 0.3, time_scale: float = 1.0):
 def run_monitor(args: argparse.Namespace) -> int:
     from ..measurements.files import MeasurementError
     from ..outputs import check_writable
-    from .core import Monitor
+    from .core import ALARM_EVENTS, Monitor, interrupts_held
     from .fleet import open_stream
     from .stream import read_ahead
 
@@ -122,20 +122,28 @@ def run_monitor(args: argparse.Namespace) -> int:
 
         live = LiveView(args.file)
 
+    alarms_out = 0  # the monitor's alarm events written so far
+
     def emit(event: dict) -> None:
+        nonlocal alarms_out
         clock = getattr(reader, "clock", None)
         if clock is not None:
             event = clock.annotate(event)
-        if live is not None:
-            live.show(event)
-        else:
-            # one write per line: an interrupt never leaves half a line for the summary to glue onto
-            sys.stdout.write(json.dumps(event) + "\n")
-            sys.stdout.flush()
+        # one line written whole: Ctrl-C in a blocked write cut a status line and glued the
+        # summary to it
+        with interrupts_held():
+            if live is not None:
+                live.show(event)
+            else:
+                sys.stdout.write(json.dumps(event) + "\n")
+                sys.stdout.flush()
+            alarms_out += event["event"] in ALARM_EVENTS
 
     reader, ip, scale = open_stream(args.file, rig=rig, natural_rpm=args.natural_rpm, follow=args.follow,
                                     idle_exit=args.idle_exit)
     monitor = Monitor.load(args.resume) if args.resume else None
+    if monitor is not None:
+        alarms_out = len(monitor.events)  # the saved run's, written by it
     status = 0
     try:
         for chunk in read_ahead(reader):  # parsing overlaps the monitor's work
@@ -155,7 +163,11 @@ def run_monitor(args: argparse.Namespace) -> int:
         emit({"event": "error", "message": str(exc), "line": line, "samples": monitor.samples})
         status = 2
     except KeyboardInterrupt:
+        # the monitor stopped between two steps (Monitor.update): the alarms its last step
+        # raised may not have been written yet; the summary and the state say the same time
         status = 130
+        for event in (monitor.events[alarms_out:] if monitor is not None else []):
+            emit(event)
     finally:
         if live is not None:
             live.stop()

@@ -15,9 +15,13 @@ core's own functions.  The sequential test and its threshold are derived in
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import signal
+import threading
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
@@ -36,10 +40,37 @@ from ..regression import DEFAULT_EFFECTS, build_rows
 from . import kernel as K
 from .detector import CusumDesign
 
-__all__ = ["Monitor", "MonitorConfig"]
+__all__ = ["ALARM_EVENTS", "Monitor", "MonitorConfig", "interrupts_held"]
 
 _STATE_VERSION = 1
+#: the kinds of event an alarm raises (the others: "status", "summary", "error")
+ALARM_EVENTS = ("appeared", "changed", "disappeared")
 _N_COLS = len(COLUMNS)
+
+
+@contextlib.contextmanager
+def interrupts_held() -> Iterator[None]:
+    """Ctrl-C (SIGINT) held back until the block ends, then raised as ``KeyboardInterrupt``.
+
+    A step that changes several parts of the monitor's state (or writes one output line)
+    then either happens whole or not at all: an interrupt in its middle left a saved state
+    that counted samples it never processed (a summary at t 0.0 beside a state at t 289.86)
+    and status lines cut short.  Only where Python's own handler is in place, in the main
+    thread (elsewhere a signal cannot be caught, or the program handles it itself).  A
+    blocked write goes on after the signal (PEP 475), so a line is written whole.
+    """
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt
 
 
 @dataclass(frozen=True)
@@ -186,38 +217,50 @@ class Monitor:
 
     # ------------------------------------------------------------------ the stream
     def update(self, chunk: np.ndarray) -> list[dict]:
-        """Feed samples; returns the events (and status lines) they raised."""
+        """Feed samples; returns the events (and status lines) they raised.
+
+        Ctrl-C (``KeyboardInterrupt``) between two steps leaves a consistent state: the
+        samples of the steps done are processed (their events in :attr:`events`), the rest
+        wait in the unprocessed buffer (saved with the state, processed first on resume).
+        """
         data = self._validate(chunk)
         a = self._arrays
         stream = a["stream"]
-        if data.shape[0]:
-            t_all = data[:2, 0] if math.isnan(stream[1]) else np.concatenate([[stream[1]], data[:1, 0]])
-            if stream[2] == 0.0 and t_all.size > 1:
-                stream[2] = t_all[1] - t_all[0]
-            stream[0] += data.shape[0]
-            stream[1] = data[-1, 0]
-            if math.isnan(stream[3]) and self.config.status_every:
-                stream[3] = data[0, 0] + self.config.status_every
-        buf = np.concatenate([a["pending"], data]) if a["pending"].shape[0] else data
         B = self.config.block
+        with interrupts_held():  # the counters and the buffer of waiting samples change together
+            if data.shape[0]:
+                t_all = data[:2, 0] if math.isnan(stream[1]) else np.concatenate([[stream[1]], data[:1, 0]])
+                if stream[2] == 0.0 and t_all.size > 1:
+                    stream[2] = t_all[1] - t_all[0]
+                stream[0] += data.shape[0]
+                stream[1] = data[-1, 0]
+                if math.isnan(stream[3]) and self.config.status_every:
+                    stream[3] = data[0, 0] + self.config.status_every
+            buf = np.concatenate([a["pending"], data]) if a["pending"].shape[0] else data
+            a["pending"] = buf  # every sample received is processed or waiting, at any moment
         nb = buf.shape[0] // B
         out: list[dict] = []
         start = 0
-        while start < nb:
-            stop = nb
-            every = self.config.status_every
-            if every:
-                # cut at the block that reaches the next status time
-                ends = buf[np.arange(start, nb) * B + B - 1, 0]
-                hit = np.flatnonzero(ends >= stream[3])
-                if hit.size:
-                    stop = start + int(hit[0]) + 1
-            out.extend(self._process(buf[start * B : stop * B]))
-            if every and buf[stop * B - 1, 0] >= stream[3]:
-                out.append(self.status())
-                stream[3] += every * max(1.0, math.floor((buf[stop * B - 1, 0] - stream[3]) / every) + 1.0)
-            start = stop
-        a["pending"] = np.array(buf[nb * B :], dtype=float)
+        try:
+            while start < nb:
+                # a step: the blocks up to the next status line, processed whole (see above)
+                with interrupts_held():
+                    stop = nb
+                    every = self.config.status_every
+                    if every:
+                        # cut at the block that reaches the next status time
+                        ends = buf[np.arange(start, nb) * B + B - 1, 0]
+                        hit = np.flatnonzero(ends >= stream[3])
+                        if hit.size:
+                            stop = start + int(hit[0]) + 1
+                    out.extend(self._process(buf[start * B : stop * B]))
+                    if every and buf[stop * B - 1, 0] >= stream[3]:
+                        out.append(self.status())
+                        stream[3] += every * max(1.0, math.floor((buf[stop * B - 1, 0] - stream[3]) / every) + 1.0)
+                    start = stop
+                    a["pending"] = buf[start * B :]  # a view: the copy is made once, below
+        finally:  # the samples not processed (an incomplete block, or all after an interrupt) wait
+            a["pending"] = np.array(buf[start * B :], dtype=float)
         return out
 
     def _validate(self, chunk: np.ndarray) -> np.ndarray:
@@ -373,8 +416,12 @@ class Monitor:
                 "significant": self.significant(), "noise_floor": self.noise_floor, "cusum": self.cusum}
 
     def summary(self) -> dict:
-        """The end-of-stream summary (the last incomplete block is left unprocessed)."""
+        """The end-of-stream summary: ``t`` the last processed sample's time, ``t_received`` the
+        last received one's; ``unprocessed_samples`` between them wait (the last incomplete
+        block, or all after Ctrl-C stopped a step) and are saved with the state."""
+        received = float(self._arrays["stream"][1])
         return {"event": "summary", "samples": self.samples, "t": self.t, "speed": self.speed,
+                "t_received": received if math.isfinite(received) else None,
                 "alarms": len(self.events),
                 "events": [{k: e[k] for k in ("event", "effect", "t_onset", "t_alarm")} for e in self.events],
                 "coefficients": self.coefficients(), "significant": self.significant(),

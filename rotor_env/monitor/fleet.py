@@ -93,7 +93,7 @@ def monitor_streams(sources: list[str], config, *, rig=None, natural_rpm: float 
     """
     import ray
 
-    from ..ray_cluster import init_ray
+    from ..ray_cluster import init_ray, stop_ray
 
     names = [str(Path(s)) for s in sources]
     if len(set(names)) != len(names):
@@ -132,4 +132,4 @@ def monitor_streams(sources: list[str], config, *, rig=None, natural_rpm: float 
         return [results[n] for n in names]
     finally:
         if started:
-            ray.shutdown()
+            stop_ray()

@@ -87,6 +87,9 @@ class LiveView:
     def print_summary(self, summary: dict) -> None:
         end = f"t = {summary['t_s']:.3f} s ({summary['rpm']:.0f} rpm)" if "t_s" in summary else f"t = {summary['t']:.2f}"
         self.console.print(f"{summary['samples']} samples to {end}: {summary['alarms']} alarm(s)")
+        if summary.get("unprocessed_samples"):
+            self.console.print(f"  {summary['unprocessed_samples']} samples received after it not processed (the last "
+                               "incomplete block, or stopped by Ctrl-C): a saved state keeps them")
         for e in summary["events"]:
             self.console.print(f"  {e['effect']} {e['event']} at {_when(e)}")
 

@@ -10,7 +10,9 @@ length.  The raw columns come from :class:`~.stream.StreamReader` (CSV/Parquet, 
    column and value, and the rows before the bad line are processed first;
 2. **spin**: a keyphasor through :class:`~rotor_env.measurements.keyphasor.KeyphasorTracker`
    (fixed threshold, edges across chunks, the batch path's missing/extra-pulse check,
-   the angle from a local cubic spline through the edges: four revolutions held back);
+   the angle from a local cubic spline through the edges: four revolutions held back;
+   a train at half the shaft's rate all through is refused from the probes' 1X and 2X
+   over the revolutions the DC gap is learned from);
    a speed column integrated by the trapezoid rule, its derivative by central
    differences (one sample held back);
 3. **origin**: probe readings to metres; with the rig's ``slow_roll_rpm`` the runout
@@ -52,7 +54,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from ..measurements import COLUMNS
 from ..measurements.files import UNIFORM_RTOL, MeasurementError
-from ..measurements.keyphasor import KeyphasorError, KeyphasorTracker
+from ..measurements.keyphasor import KeyphasorError, KeyphasorTracker, check_once_per_turn
 from ..measurements.probes import probe_matrix
 from ..measurements.rig import SPEED_UNITS, TIME_UNITS, Rig
 from ..measurements.waveforms import LENGTH_UNIT, MAX_PROBE_M, TARGET_DT
@@ -197,9 +199,24 @@ class _Origin:
                     if not first.any():
                         first = np.ones(len(phi), dtype=bool)
                     self.gap = xc[first].mean(axis=0)
+                    self._check_pulse_rate(phi, x, lines)
                     return t, phi, speed, accel, self._axes(xc), lines
             return None
         return t, phi, speed, accel, self._axes(self._corrected(phi, x)), lines
+
+    def _check_pulse_rate(self, phi: np.ndarray, x: np.ndarray, lines: np.ndarray) -> None:
+        """The batch path's half-rate check (``check_once_per_turn``) on the revolutions the
+        DC gap is learned from: a keyphasor at half the shaft's rate all through is regular,
+        only the probes show it (their 1X is noise, their 2X the shaft's 1X)."""
+        if self.rig.keyphasor is None:
+            return
+        try:
+            check_once_per_turn(phi, {p.name: x[:, j] for j, p in enumerate(self.rig.probes)},
+                                where=f"{self.where}, column {self.rig.keyphasor!r}", lines=lines)
+        except KeyphasorError as exc:
+            err = MeasurementError(str(exc))
+            err.line = int(lines[0])
+            raise err from None
 
     def _learn_runout(self) -> None:
         phi = np.concatenate([b[1] for b in self._buf])
