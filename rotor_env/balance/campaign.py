@@ -8,6 +8,7 @@ import numpy as np
 
 from .influence import InfluenceFit, fit_influence, visibility
 from .misfit import influence_misfit, unbalance_misfit
+from .profile import joint_variances
 from .result import BalanceResult
 from .runs import (
     BalanceData,
@@ -69,11 +70,18 @@ def balance_data(data: BalanceData, campaign: Campaign, *, phase: str = "lag") -
     if fit.condition_number > 30:
         notes.append(f"condition number {fit.condition_number:.3g}: the planes act alike at these probes and speeds; "
                      "the correction splits between them poorly (add speeds or probes where they differ)")
+    c0 = fit.reference_combination()
+    U_two_stage, _ = fit.unbalance(c0)
+    # the unbalance: maximum likelihood of every run at once (profile.py), started from the
+    # two-stage estimate; its intervals are the profile likelihood's (a ratio at low SNR is far
+    # from its linearisation); the first-order covariance stays for the residual and the grade
+    joint = joint_variances(fit).fit(U_two_stage)
+    U0 = joint.U
+    cov0 = fit.unbalance_covariance(c0, U0)
     unb = {}
     for k, run in enumerate(data.runs):
-        unb[run] = fit.unbalance(fit.run_combination(k))
-    c0 = fit.reference_combination()
-    U0, cov0 = fit.unbalance(c0)
+        Uk = U0 + fit.W[k]
+        unb[run] = (Uk, fit.unbalance_covariance(fit.run_combination(k), Uk))
     residual = fit.residual_vibration(c0, U0)
     im = influence_misfit(fit) if fit.variance_source != "none" else {"testable": False, "reason": "no noise level"}
     um = unbalance_misfit(fit) if fit.variance_source != "none" else {"testable": False, "reason": "no noise level"}
@@ -84,7 +92,7 @@ def balance_data(data: BalanceData, campaign: Campaign, *, phase: str = "lag") -
         um["explanations"] = [{"explanation": e["explanation"], "testable": False,
                                "reason": "the influence coefficients it rests on misfit (above)"}
                               for e in um.get("explanations", [])]
-    return BalanceResult(fit, unb, (U0, cov0), residual, im, um, vis, None, notes)
+    return BalanceResult(fit, unb, (U0, cov0), residual, im, um, vis, None, notes, joint=joint)
 
 
 def model_based_unbalance(table: str | os.PathLike, campaign: Campaign, *, run: str | None = None,
