@@ -310,7 +310,14 @@ class BalanceResult:
                         lines.append("    no explanation tried removes it" + (
                             ": a non-linear rotor (rub, clearance, loose part) is left" if part is m["influence"]
                             else ""))
-        if d["model_based"]:
+        if d["model_based"] and "planes" in d["model_based"]:
+            mb = d["model_based"]
+            parts = "; ".join(f"{pl} {v['g_mm']:.4g} g·mm at {v['angle_deg']:.0f} deg (± {v['ci95_g_mm']:.3g} g·mm)"
+                              for pl, v in mb["planes"].items())
+            lines.append(f"model-based (one run-up of {mb['run']}, two disks, no trial weight): {parts}")
+            if not mb["planes_separated"]:
+                lines.append(f"  the run-up cannot decide {mb['cannot_decide']}")
+        elif d["model_based"]:
             mb = d["model_based"]
             lines.append(f"model-based (one run-up of {mb['run']}, no trial weight): {mb['g_mm']:.4g} g·mm at "
                          f"{mb['angle_deg']:.0f} deg")

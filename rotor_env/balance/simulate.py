@@ -124,7 +124,7 @@ def table_of(header: list[str], rows: list[list], *, phase: str = "lag", source:
 
 
 def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float = 1.0, extra_runs: int = 1,
-                   rpms=(1200.0, 1500.0, 2000.0), every_run: bool = False) -> dict:
+                   rpms=(1200.0, 1500.0, 2000.0), every_run: bool = True) -> dict:
     """Share of seeds whose 95 % intervals hold the truth, for a linear rotor with random trial weights.
 
     Each seed draws the reference unbalance (200-1500 g·mm per plane, any angle) and, per
