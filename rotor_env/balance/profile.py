@@ -173,64 +173,92 @@ class JointUnbalance:
                                  options={"gtol": 1e-6})
         return float(best.fun), best.x
 
-    def magnitude_interval(self, j: int, shift: complex, crit: float) -> tuple[float, float]:
-        """The 95 % profile interval of ``|U_j + shift|`` (``crit``: the allowed rise of ``R``)."""
+    def magnitude_interval(self, j: int, shift: complex, crit: float, guess: float | None = None) -> tuple[float, float]:
+        """The 95 % profile interval of ``|U_j + shift|`` (``crit``: the allowed rise of ``R``).
+
+        ``guess``: a half-width to start the search from (the first-order one).
+        """
         assert self.U is not None
         z = abs(self.U[j] + shift)
         if z == 0:
             return 0.0, math.inf
-        warm: dict[str, np.ndarray | None] = {"lo": None, "hi": None}
+        guess = guess if guess and math.isfinite(guess) and guess > 0 else 0.1 * z
+        bounds = []
+        for side in (-1.0, 1.0):
+            warm: list[np.ndarray | None] = [None]
 
-        memo: dict[float, float] = {}
+            def excess(d: float, side: float = side, warm: list = warm) -> float:
+                val, x = self._profile(j, shift, radius=z + side * d, warm=warm[0])
+                warm[0] = x
+                return val - self.rss_min - crit
 
-        def excess(r: float, side: str) -> float:
-            if r not in memo:
-                val, x = self._profile(j, shift, radius=r, warm=warm[side])
-                warm[side] = x
-                memo[r] = val - self.rss_min - crit
-            return memo[r]
-
-        lo = 0.0
-        if excess(1e-9 * z, "lo") > 0:
-            lo = optimize.brentq(lambda r: excess(r, "lo"), 1e-9 * z, z, xtol=1e-4 * z, rtol=1e-6)
-        hi = math.inf
-        r, prev = 2.0 * z, z
-        while r < _UNBOUNDED * z:
-            if excess(r, "hi") > 0:
-                hi = optimize.brentq(lambda q: excess(q, "hi"), prev, r, xtol=1e-4 * z, rtol=1e-6)
-                break
-            prev, r = r, 2.0 * r
+            limit = z * (1 - 1e-9) if side < 0 else (_UNBOUNDED - 1) * z
+            bounds.append(_crossing(excess, guess, limit, crit))
+        lo = 0.0 if bounds[0] is None else z - bounds[0]
+        hi = math.inf if bounds[1] is None else z + bounds[1]
         return lo, hi
 
-    def angle_interval(self, j: int, shift: complex, crit: float) -> tuple[float, float]:
+    def angle_interval(self, j: int, shift: complex, crit: float, guess: float | None = None) -> tuple[float, float]:
         """The 95 % profile interval of ``arg(U_j + shift)`` (radians, lead): offsets below and above.
 
-        ``(pi, pi)`` where the angle is not bounded (the magnitude's interval reaches zero).
+        ``pi`` on a side where the angle is not bounded (the magnitude's interval reaches zero).
         """
         assert self.U is not None
         a = float(np.angle(self.U[j] + shift))
+        guess = guess if guess and math.isfinite(guess) and guess > 0 else 0.1
         out = []
         for sign in (-1.0, 1.0):
             warm: list[np.ndarray | None] = [None]
-            memo: dict[float, float] = {0.0: -crit}
 
-            def excess(d: float, sign: float = sign, warm: list = warm, memo: dict = memo) -> float:
-                if d not in memo:
-                    val, x = self._profile(j, shift, angle=a + sign * d, warm=warm[0])
-                    warm[0] = x
-                    memo[d] = val - self.rss_min - crit
-                return memo[d]
+            def excess(d: float, sign: float = sign, warm: list = warm) -> float:
+                val, x = self._profile(j, shift, angle=a + sign * d, warm=warm[0])
+                warm[0] = x
+                return val - self.rss_min - crit
 
-            grid = [math.pi / 32 * 2 ** i for i in range(6)]  # 5.6 deg ... 180 deg
-            prev, found = 0.0, None
-            for d in grid:
-                d = min(d, math.pi)
-                if excess(d) > 0:
-                    found = optimize.brentq(excess, prev, d, xtol=1e-4)
-                    break
-                prev = d
+            found = _crossing(excess, min(guess, math.pi), math.pi, crit)
             out.append(math.pi if found is None else found)
         return out[0], out[1]
+
+
+def _crossing(excess, guess: float, limit: float, crit: float) -> float | None:
+    """The offset ``d`` in ``(0, limit]`` where ``excess`` (``-crit`` at 0) turns positive; ``None`` if never.
+
+    Starts at ``guess`` (the first-order half-width) and steps by 1.6 inwards or outwards
+    until the sign changes, then Brent's method to 0.1 % of the half-width.
+    """
+    memo: dict[float, float] = {}
+    raw = excess
+
+    def excess(d: float) -> float:
+        if d not in memo:
+            memo[d] = raw(d)
+        return memo[d]
+
+    d = min(guess, limit)
+    val = excess(d)
+    inside, outside = 0.0, None
+    if val > 0:
+        outside = d
+        for _ in range(40):
+            d /= 1.6
+            if excess(d) <= 0:
+                inside = d
+                break
+            outside = d
+        else:
+            return outside
+    else:
+        inside = d
+        while outside is None:
+            if d >= limit:
+                return None
+            d = min(d * 1.6, limit)
+            if excess(d) > 0:
+                outside = d
+            else:
+                inside = d
+    memo.setdefault(0.0, -crit)
+    return float(optimize.brentq(excess, inside, outside, xtol=1e-3 * guess))
 
 
 def fit_joint(Y: np.ndarray, v: np.ndarray, W: np.ndarray, start: np.ndarray) -> JointUnbalance:

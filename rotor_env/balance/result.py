@@ -129,8 +129,12 @@ class BalanceResult:
                 k = self.fit.data.runs.index(run)
                 shift = complex(self.fit.W[k, j])
                 crit = t_quantile(float(self.profile_dof()[j])) ** 2 / 2.0  # F(1, nu) on the deviance 2 dR
-                lo, hi = self.joint.magnitude_interval(j, shift, crit)
-                below, above = self.joint.angle_interval(j, shift, crit)  # lead, radians
+                # the first-order half-widths start the search (the profile is near them at high SNR)
+                U, cov = self.unbalance[run]
+                half = math.sqrt(2 * crit) * math.sqrt(max(float(np.real(cov[j, j])), 0.0) / 2)
+                lo, hi = self.joint.magnitude_interval(j, shift, crit, guess=half)
+                below, above = self.joint.angle_interval(j, shift, crit,
+                                                         guess=min(math.pi / 2, half / max(abs(U[j]), 1e-300)))
                 if self.phase == "lag":  # the lag angle runs the other way
                     below, above = above, below
                 self._profiles[key] = {"g_mm": (lo, hi), "deg": (math.degrees(below), math.degrees(above))}
