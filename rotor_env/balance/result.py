@@ -27,7 +27,7 @@ COVERS = ("95 % intervals (Student t, Welch-Satterthwaite degrees of freedom of 
           "placement of the weights, or a drift between runs that the repeats do not see")
 
 
-def _polar_ci(U: complex, var: float, tq: float, phase: str) -> tuple[float, float, float, float]:
+def polar_ci(U: complex, var: float, tq: float, phase: str) -> tuple[float, float, float, float]:
     """Magnitude, angle (phase convention), and their 95 % half-widths for a circular complex estimate."""
     amp, ang = to_phase(np.array([U]), phase)
     se = math.sqrt(max(var, 0.0) / 2.0)  # circular: each component carries half the variance
@@ -110,7 +110,7 @@ class BalanceResult:
             return np.full(len(fit.campaign.planes), float(fit.dof))
         S, P, J = fit.H.shape
         U0 = self.reference_unbalance[0]
-        q = fit._q(fit.reference_combination(), U0)
+        q = fit.noise_terms(fit.reference_combination(), U0)
         share = (np.abs(fit.G) ** 2 * q[None, :]).reshape(J, S, P).sum(axis=1)  # (J, P)
         den = np.sum(share ** 2 / joint.probe_dof[None, :], axis=1)
         return np.where(den > 0, share.sum(axis=1) ** 2 / np.where(den > 0, den, 1.0), float(fit.dof))
@@ -160,7 +160,7 @@ class BalanceResult:
         for s in range(S):
             for p in range(P):
                 for j, plane in enumerate(camp.plane_names):
-                    a, ang, ca, cd = _polar_ci(fit.H[s, p, j], float(np.real(fit.cov_theta[s, p, 1 + j, 1 + j])),
+                    a, ang, ca, cd = polar_ci(fit.H[s, p, j], float(np.real(fit.cov_theta[s, p, 1 + j, 1 + j])),
                                                float(t_cell[s, p]), self.phase)
                     influence.append({"rpm": float(data.rpm[s]), "probe": data.probes[p], "plane": plane,
                                       "amp_per_g_mm": a, "angle_deg": ang,
@@ -204,7 +204,7 @@ class BalanceResult:
         t_res = self._t(fit.residual_dof(c0, Uref))
         for s in range(S):
             for p in range(P):
-                a, ang, ca, _ = _polar_ci(R[s, p], float(Rvar[s, p]), float(t_res[s, p]), self.phase)
+                a, ang, ca, _ = polar_ci(R[s, p], float(Rvar[s, p]), float(t_res[s, p]), self.phase)
                 b, bang = to_phase(np.array([X0[s, p]]), self.phase)
                 predicted.append({"rpm": float(data.rpm[s]), "probe": data.probes[p], "amp": a, "phase_deg": ang,
                                   "ci95_amp": ca if self.intervals else None, "before_amp": float(b[0]),

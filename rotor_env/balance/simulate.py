@@ -143,7 +143,7 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
     """
     from . import balance_data
     from .influence import t_quantile
-    from .result import _polar_ci
+    from .result import polar_ci
     from .runs import BalanceError, Campaign, Plane, group_table
 
     names = tuple("AB"[:planes])
@@ -213,7 +213,7 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
                 half_a = max(hi - e_amp[0], e_amp[0] - lo)
                 count("ref_g_mm_sym", abs(amp[0] - e_amp[0]) <= half_a)
                 count("ref_deg_sym", abs(d) <= min(180.0, max(below, above)))
-                a2, g2, ca2, cd2 = _polar_ci(U2[j], float(np.real(cov2[j, j])), tq2[j], "lag")
+                a2, g2, ca2, cd2 = polar_ci(U2[j], float(np.real(cov2[j, j])), tq2[j], "lag")
                 count("ref_g_mm_first_order", abs(a2 - amp[0]) <= ca2)
                 count("ref_deg_first_order", abs(math.remainder(g2 - ang[0], 360.0)) <= cd2)
         t_cell = [[t_quantile(float(v)) for v in row] for row in fit.cell_dof]
@@ -223,7 +223,7 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
                     e = np.zeros(planes, dtype=complex)
                     e[j] = 1.0
                     h = rotor.response(rpm, e)[p]  # linear: the response to 1 g·mm
-                    a, _, ca, _ = _polar_ci(fit.H[s, p, j], float(np.real(fit.cov_theta[s, p, 1 + j, 1 + j])),
+                    a, _, ca, _ = polar_ci(fit.H[s, p, j], float(np.real(fit.cov_theta[s, p, 1 + j, 1 + j])),
                                             t_cell[s][p], "lag")
                     count("influence", abs(a - abs(h)) <= ca)
     out: dict = {k: (hits[k] / counts[k] if counts[k] else None) for k in keys}
