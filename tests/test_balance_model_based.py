@@ -8,6 +8,7 @@ influence-coefficient answer comes from a trial-weight campaign on the same roto
 from __future__ import annotations
 
 import csv
+import json
 import math
 
 import numpy as np
@@ -86,7 +87,7 @@ def test_a_stiff_shaft_run_up_cannot_split_the_planes_and_says_so():
         assert _adiff(mb["sum"]["angle_deg"], ang) <= WIDE * mb["sum"]["ci95_deg"]
 
 
-def test_two_plane_model_based_through_balance_and_the_rig_file(tmp_path):
+def test_two_plane_model_based_through_balance_and_the_rig_file(tmp_path, capsys):
     """The same through balance(): runs file with disk_mass_kg for both planes, the probes'
     planes and angles from the rig; the reference is a run-up, the trial runs steady."""
     rotor = DiskRotor(masses_kg=(20.0, 20.0), shaft_ratio=1.5, probes=PROBES)
@@ -112,8 +113,21 @@ def test_two_plane_model_based_through_balance_and_the_rig_file(tmp_path):
     runs.write_text("planes: {A: {radius_mm: 100}, B: {radius_mm: 100}}\nreference: ref\nruns:\n"
                     "  T1: {A: {mass_g: 5, angle_deg: 0}}\n  T2: {B: {mass_g: 5, angle_deg: 90}}\n"
                     "speed_tolerance_rpm: 1\ndisk_mass_kg: {A: 20, B: 20}\n")
+    rig = tmp_path / "rig.yaml"
+    rig.write_text("keyphasor: kp\nprobes:\n  - {name: x1, angle_deg: 45, plane: A}\n"
+                   "  - {name: y1, angle_deg: -45, plane: A}\n  - {name: x2, angle_deg: 45, plane: B}\n"
+                   "  - {name: y2, angle_deg: -45, plane: B}\nplanes: {A: {axial_position_m: 0.0}, "
+                   "B: {axial_position_m: 0.25}}\n")
+    from rotor_env.cli import main
+
+    # the command line: the rig file gives the probes' planes and angles
+    assert main(["balance", str(table), "--runs", str(runs), "--rig", str(rig), "--json"]) == 0
+    cli_mb = json.loads(capsys.readouterr().out)["model_based"]
+    assert cli_mb["planes_separated"] and set(cli_mb["planes"]) == {"A", "B"}
     res = balance(table, runs, probe_angles={"x1": 45.0, "y1": -45.0, "x2": 45.0, "y2": -45.0},
                   probe_planes={"x1": "A", "y1": "A", "x2": "B", "y2": "B"})
+    assert res.to_dict()["model_based"]["planes"]["A"]["g_mm"] == pytest.approx(cli_mb["planes"]["A"]["g_mm"],
+                                                                                   rel=1e-9)
     mb = res.to_dict()["model_based"]
     assert mb is not None and mb["planes_separated"], res.notes
     for j, name in enumerate("AB"):
