@@ -8,6 +8,7 @@ import numpy as np
 
 from .influence import InfluenceFit, fit_influence, visibility
 from .misfit import influence_misfit, unbalance_misfit
+from .profile import joint_variances
 from .result import BalanceResult
 from .runs import (
     BalanceData,
@@ -29,15 +30,19 @@ LOW_SNR = 10.0
 
 def balance(table: str | os.PathLike, runs: str | os.PathLike | Campaign, *, amp_unit: str = "um",
             phase: str = "lag", probe_angles: dict[str, float] | None = None,
-            model_based: bool = True) -> BalanceResult:
-    """Balance from a table file and a runs file (or a :class:`Campaign`)."""
+            probe_planes: dict[str, str] | None = None, model_based: bool = True) -> BalanceResult:
+    """Balance from a table file and a runs file (or a :class:`Campaign`).
+
+    ``probe_angles`` (degrees, in the direction of rotation) and ``probe_planes`` (probe ->
+    plane) come from the rig file; the two-plane model-based unbalance needs both.
+    """
     campaign = runs if isinstance(runs, Campaign) else load_campaign(runs)
     data = read_balance_table(table, campaign, amp_unit=amp_unit, phase=phase)
     res = balance_data(data, campaign, phase=phase)
     if model_based and campaign.disk_mass_kg:
         try:
             res.model_based = model_based_unbalance(table, campaign, amp_unit=amp_unit, phase=phase,
-                                                    probe_angles=probe_angles)
+                                                    probe_angles=probe_angles, probe_planes=probe_planes)
         except (ValueError, np.linalg.LinAlgError) as exc:
             res.notes.append(f"model-based unbalance not computed: {exc}")
     return res
@@ -69,11 +74,18 @@ def balance_data(data: BalanceData, campaign: Campaign, *, phase: str = "lag") -
     if fit.condition_number > 30:
         notes.append(f"condition number {fit.condition_number:.3g}: the planes act alike at these probes and speeds; "
                      "the correction splits between them poorly (add speeds or probes where they differ)")
+    c0 = fit.reference_combination()
+    U_two_stage, _ = fit.unbalance(c0)
+    # the unbalance: maximum likelihood of every run at once (profile.py), started from the
+    # two-stage estimate; its intervals are the profile likelihood's (a ratio at low SNR is far
+    # from its linearisation); the first-order covariance stays for the residual and the grade
+    joint = joint_variances(fit).fit(U_two_stage)
+    U0 = joint.U
+    cov0 = fit.unbalance_covariance(c0, U0)
     unb = {}
     for k, run in enumerate(data.runs):
-        unb[run] = fit.unbalance(fit.run_combination(k))
-    c0 = fit.reference_combination()
-    U0, cov0 = fit.unbalance(c0)
+        Uk = U0 + fit.W[k]
+        unb[run] = (Uk, fit.unbalance_covariance(fit.run_combination(k), Uk))
     residual = fit.residual_vibration(c0, U0)
     im = influence_misfit(fit) if fit.variance_source != "none" else {"testable": False, "reason": "no noise level"}
     um = unbalance_misfit(fit) if fit.variance_source != "none" else {"testable": False, "reason": "no noise level"}
@@ -84,13 +96,16 @@ def balance_data(data: BalanceData, campaign: Campaign, *, phase: str = "lag") -
         um["explanations"] = [{"explanation": e["explanation"], "testable": False,
                                "reason": "the influence coefficients it rests on misfit (above)"}
                               for e in um.get("explanations", [])]
-    return BalanceResult(fit, unb, (U0, cov0), residual, im, um, vis, None, notes)
+    return BalanceResult(fit, unb, (U0, cov0), residual, im, um, vis, None, notes, joint=joint)
 
 
 def model_based_unbalance(table: str | os.PathLike, campaign: Campaign, *, run: str | None = None,
                           amp_unit: str = "um", phase: str = "lag",
-                          probe_angles: dict[str, float] | None = None) -> dict:
+                          probe_angles: dict[str, float] | None = None,
+                          probe_planes: dict[str, str] | None = None) -> dict:
     """The unbalance from one run-up of ``run`` (default the reference), no trial weight.
+
+    Two planes: :func:`_model_based_two_planes` (two disks on a shaft, :mod:`.model_based`).
 
     The 1X transient fit of :func:`rotor_env.diagnosis.from_vectors.diagnose_vectors`
     (damping, natural frequency, unbalance) on the run's rows; its eccentricity times the
@@ -102,9 +117,12 @@ def model_based_unbalance(table: str | os.PathLike, campaign: Campaign, *, run: 
     from ..diagnosis.from_vectors import diagnose_vectors
     from ..measurements.vectors import VectorTable, load_vector_table
 
+    if len(campaign.planes) == 2:
+        return _model_based_two_planes(table, campaign, run=run, amp_unit=amp_unit, phase=phase,
+                                       probe_angles=probe_angles, probe_planes=probe_planes)
     if len(campaign.planes) != 1:
-        raise BalanceError("the model-based unbalance is one plane's (the translation model): this campaign has "
-                           f"{len(campaign.planes)} planes")
+        raise BalanceError("the model-based unbalance models one or two planes (one disk, or two disks on a "
+                           f"shaft): this campaign has {len(campaign.planes)}")
     plane = campaign.planes[0].name
     if plane not in campaign.disk_mass_kg:
         raise BalanceError(f"{campaign.source}: disk_mass_kg.{plane} is missing")
@@ -130,3 +148,48 @@ def model_based_unbalance(table: str | os.PathLike, campaign: Campaign, *, run: 
             "eccentricity": u["eccentricity"], "disk_mass_kg": campaign.disk_mass_kg[plane],
             "natural_frequency_rpm": float(diag.after.w_ref * 60 / (2 * np.pi)),
             "frame": "probe reference direction" if probe_angles else "as the first probe sees it (no probe angles)"}
+
+
+def _model_based_two_planes(table: str | os.PathLike, campaign: Campaign, *, run: str | None, amp_unit: str,
+                            phase: str, probe_angles: dict[str, float] | None,
+                            probe_planes: dict[str, str] | None) -> dict:
+    """Two planes: the two-disk model fitted to one run-up (:func:`.model_based.fit_run_up`).
+
+    Needs ``disk_mass_kg`` for both planes and, from the rig file, every probe's plane and
+    angle.  Says what the run-up cannot decide (the split between the planes).
+    """
+    from ..measurements.vectors import AMPLITUDE_UNITS, load_vector_table
+    from .model_based import fit_run_up
+
+    names = campaign.plane_names
+    missing = [nm for nm in names if nm not in campaign.disk_mass_kg]
+    if missing:
+        raise BalanceError(f"{campaign.source}: disk_mass_kg.{missing[0]} is missing (the two-plane model-based "
+                           "unbalance needs the mass of each plane's disk)")
+    run = run or campaign.reference
+    full = load_vector_table(table, amp_unit=amp_unit, phase=phase, run_column="run")
+    if not probe_planes or not probe_angles:
+        raise BalanceError(f"{full.source}: the two-plane model-based unbalance needs each probe's plane and angle "
+                           "(--rig with probes: [{name, angle_deg, plane}])")
+    probes = []
+    for nm in full.probes:
+        if nm not in probe_planes or nm not in probe_angles:
+            raise BalanceError(f"{full.source}, column {nm + '_amp'!r}: probe {nm!r} is not in the rig file "
+                               "(its plane and angle are needed)")
+        if probe_planes[nm] not in names:
+            raise BalanceError(f"{full.source}, column {nm + '_amp'!r}: the rig puts probe {nm!r} on plane "
+                               f"{probe_planes[nm]!r}, not one of the runs file's planes {list(names)}")
+        probes.append((names.index(probe_planes[nm]), float(probe_angles[nm])))
+    rows = np.array([r == run for r in full.runs])
+    order = np.argsort(full.speed[rows], kind="stable")
+    rpm = full.rpm[rows][order]
+    Y = full.vectors[1][rows][order]
+    try:
+        fit = fit_run_up(rpm, Y, probes, [campaign.disk_mass_kg[nm] for nm in names],
+                         amp_scale=AMPLITUDE_UNITS[full.amp_unit])
+    except ValueError as exc:
+        raise BalanceError(f"{full.source} (run {run}): {exc}") from exc
+    out = {"run": run, "model": "two disks on a shaft, isotropic supports (docs/BALANCING.md §3)",
+           "disk_mass_kg": {nm: campaign.disk_mass_kg[nm] for nm in names},
+           "frame": "probe reference direction", **fit.to_dict(names, phase)}
+    return out

@@ -38,12 +38,15 @@ def _cmd_balance(args: argparse.Namespace) -> int:
     try:
         if args.report:
             check_writable(args.report, overwrite=args.force)  # before the computation
-        angles = None
+        angles = planes = None
         if args.rig:
             import math
 
-            angles = {p.name: math.degrees(p.angle) for p in load_rig(args.rig).probes}
-        res = balance(args.table, args.runs, amp_unit=args.amp_unit, phase=args.phase, probe_angles=angles)
+            rig_probes = load_rig(args.rig).probes
+            angles = {p.name: math.degrees(p.angle) for p in rig_probes}
+            planes = {p.name: p.plane for p in rig_probes}
+        res = balance(args.table, args.runs, amp_unit=args.amp_unit, phase=args.phase, probe_angles=angles,
+                      probe_planes=planes)
         if args.report:
             res.report(args.report, overwrite=args.force)
     except (BalanceError, RigError, FileExistsError, ValueError) as exc:

@@ -147,6 +147,15 @@ class InfluenceFit:
         cov = (self.G * q[None, :]) @ self.G.conj().T
         return U, cov
 
+    def noise_terms(self, c: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """``q_sp`` (N,): each cell's share of the noise of an unbalance ``U`` of the response ``c``."""
+        return self._q(c, U)
+
+    def unbalance_covariance(self, c: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """First-order complex covariance (J, J) of an unbalance ``U`` of the response ``c``."""
+        q = self._q(c, U)
+        return (self.G * q[None, :]) @ self.G.conj().T
+
     def _corrected(self, c: np.ndarray, X: np.ndarray) -> np.ndarray:
         """Least squares of ``X ≈ H U`` corrected for the noise of ``H`` (errors in variables).
 

@@ -238,7 +238,7 @@ def unbalance_misfit(fit: InfluenceFit, alpha: float = ALPHA) -> dict:
     for k, run in enumerate(fit.data.runs):
         c = fit.run_combination(k)
         U, _ = fit.unbalance(c)
-        q = fit._q(c, U)
+        q = fit.noise_terms(c, U)
         X = fit.data.Y[k].reshape(-1)
         sw = 1.0 / np.sqrt(q)
         Hw = H * sw[:, None]

@@ -11,6 +11,7 @@ import numpy as np
 from ..measurements.vectors import to_phase
 from .correction import iso_grade, split_to_holes, weight_of
 from .influence import InfluenceFit, t_quantile
+from .profile import JointUnbalance
 
 __all__ = ["BalanceResult"]
 
@@ -26,13 +27,26 @@ COVERS = ("95 % intervals (Student t, Welch-Satterthwaite degrees of freedom of 
           "placement of the weights, or a drift between runs that the repeats do not see")
 
 
-def _polar_ci(U: complex, var: float, tq: float, phase: str) -> tuple[float, float, float, float]:
+def polar_ci(U: complex, var: float, tq: float, phase: str) -> tuple[float, float, float, float]:
     """Magnitude, angle (phase convention), and their 95 % half-widths for a circular complex estimate."""
     amp, ang = to_phase(np.array([U]), phase)
     se = math.sqrt(max(var, 0.0) / 2.0)  # circular: each component carries half the variance
     ci_amp = tq * se
     ci_deg = 180.0 if amp[0] <= ci_amp else math.degrees(math.asin(min(1.0, ci_amp / amp[0])))
     return float(amp[0]), float(np.mod(ang[0], 360.0)), ci_amp, ci_deg
+
+
+def _interval_keys(amp: float, ang: float, iv: dict | None) -> dict:
+    """The JSON keys of a profile interval: ranges, and symmetric half-widths that enclose them."""
+    if iv is None:
+        return {"ci95_g_mm": None, "ci95_deg": None, "ci95_g_mm_range": None, "ci95_deg_range": None}
+    lo, hi = iv["g_mm"]
+    below, above = iv["deg"]
+    bounded = math.isfinite(hi)
+    return {"ci95_g_mm": max(hi - amp, amp - lo) if bounded else None,
+            "ci95_deg": min(180.0, max(below, above)),
+            "ci95_g_mm_range": [lo, hi if bounded else None],
+            "ci95_deg_range": [ang - below, ang + above]}
 
 
 def _jsonable(x):
@@ -60,6 +74,8 @@ class BalanceResult:
     visibility: list[dict]
     model_based: dict | None = None
     notes: list[str] = field(default_factory=list)
+    joint: JointUnbalance | None = None  #: the joint likelihood whose maximum gave ``unbalance`` (profile.py)
+    _profiles: dict = field(default_factory=dict, repr=False)
 
     @property
     def phase(self) -> str:
@@ -82,14 +98,58 @@ class BalanceResult:
             return np.full(np.shape(dof), self.tq)
         return np.vectorize(t_quantile)(np.asarray(dof, dtype=float))
 
-    def _unb_dict(self, U, cov, c) -> dict:
-        out = {}
-        tq = self._t(self.fit.unbalance_dof(c, U))
+    def profile_dof(self) -> np.ndarray:
+        """Degrees of freedom (J,) of the reference unbalance's noise level (Welch-Satterthwaite).
+
+        The joint likelihood weighs each probe by its noise level pooled over speeds and runs
+        (``probe_dof`` each); the shares are the probes' first-order contributions to the
+        unbalance's variance.
+        """
+        fit, joint = self.fit, self.joint
+        if fit.variance_source != "repeats" or joint is None or joint.probe_dof is None:
+            return np.full(len(fit.campaign.planes), float(fit.dof))
+        S, P, J = fit.H.shape
+        U0 = self.reference_unbalance[0]
+        q = fit.noise_terms(fit.reference_combination(), U0)
+        share = (np.abs(fit.G) ** 2 * q[None, :]).reshape(J, S, P).sum(axis=1)  # (J, P)
+        den = np.sum(share ** 2 / joint.probe_dof[None, :], axis=1)
+        return np.where(den > 0, share.sum(axis=1) ** 2 / np.where(den > 0, den, 1.0), float(fit.dof))
+
+    def profile_interval(self, run: str, j: int) -> dict:
+        """95 % profile-likelihood intervals of run ``run``'s total unbalance on plane ``j``.
+
+        ``g_mm`` (lo, hi) and the angle's offsets below and above the estimate in the phase
+        convention's degrees (180 where the angle is not bounded); ``None`` without intervals.
+        """
+        key = (run, j)
+        if key not in self._profiles:
+            if not self.intervals or self.joint is None:
+                self._profiles[key] = None
+            else:
+                k = self.fit.data.runs.index(run)
+                shift = complex(self.fit.W[k, j])
+                crit = t_quantile(float(self.profile_dof()[j])) ** 2 / 2.0  # F(1, nu) on the deviance 2 dR
+                # the first-order half-widths start the search (the profile is near them at high SNR)
+                U, cov = self.unbalance[run]
+                half = math.sqrt(2 * crit) * math.sqrt(max(float(np.real(cov[j, j])), 0.0) / 2)
+                lo, hi = self.joint.magnitude_interval(j, shift, crit, guess=half)
+                below, above = self.joint.angle_interval(j, shift, crit,
+                                                         guess=min(math.pi / 2, half / max(abs(U[j]), 1e-300)))
+                if self.phase == "lag":  # the lag angle runs the other way
+                    below, above = above, below
+                self._profiles[key] = {"g_mm": (lo, hi), "deg": (math.degrees(below), math.degrees(above))}
+        return self._profiles[key]
+
+    def _unb_dict(self, run: str, U) -> tuple[dict, dict]:
+        """``unbalance`` (symmetric half-widths that enclose the intervals) and ``unbalance_ci95`` (the ranges)."""
+        out, ranges = {}, {}
         for j, name in enumerate(self.fit.campaign.plane_names):
-            a, ang, ca, cd = _polar_ci(U[j], float(np.real(cov[j, j])), float(tq[j]), self.phase)
-            out[name] = {"g_mm": a, "angle_deg": ang, "ci95_g_mm": ca if self.intervals else None,
-                         "ci95_deg": cd if self.intervals else None}
-        return out
+            amp, ang = to_phase(np.array([U[j]]), self.phase)
+            a, g = float(amp[0]), float(np.mod(ang[0], 360.0))
+            iv = _interval_keys(a, g, self.profile_interval(run, j))
+            out[name] = {"g_mm": a, "angle_deg": g, "ci95_g_mm": iv["ci95_g_mm"], "ci95_deg": iv["ci95_deg"]}
+            ranges[name] = {"g_mm": iv["ci95_g_mm_range"], "angle_deg": iv["ci95_deg_range"]}
+        return out, ranges
 
     def to_dict(self) -> dict:
         fit, camp, data = self.fit, self.fit.campaign, self.fit.data
@@ -100,21 +160,23 @@ class BalanceResult:
         for s in range(S):
             for p in range(P):
                 for j, plane in enumerate(camp.plane_names):
-                    a, ang, ca, cd = _polar_ci(fit.H[s, p, j], float(np.real(fit.cov_theta[s, p, 1 + j, 1 + j])),
+                    a, ang, ca, cd = polar_ci(fit.H[s, p, j], float(np.real(fit.cov_theta[s, p, 1 + j, 1 + j])),
                                                float(t_cell[s, p]), self.phase)
                     influence.append({"rpm": float(data.rpm[s]), "probe": data.probes[p], "plane": plane,
                                       "amp_per_g_mm": a, "angle_deg": ang,
                                       "ci95_amp_per_g_mm": ca if self.intervals else None,
                                       "ci95_deg": cd if self.intervals else None})
         runs = {}
-        for k, run in enumerate(data.runs):
-            U, cov = self.unbalance[run]
+        for run in data.runs:
+            U, _ = self.unbalance[run]
             cells = [c for c in self.influence_misfit.get("cells", []) if c["run"] == run]
             one = self.unbalance_misfit.get("runs", {}).get(run, {})
+            unbalance, ranges = self._unb_dict(run, U)
             runs[run] = {
                 "reference": run == camp.reference,
                 "trial": {pl: {"mass_g": m, "angle_deg": a} for pl, (m, a) in camp.weights.get(run, {}).items()},
-                "unbalance": self._unb_dict(U, cov, fit.run_combination(k)),
+                "unbalance": unbalance,
+                "unbalance_ci95": ranges if self.intervals else None,
                 "misfit": {"influence": cells, "one_unbalance": one,
                            "flagged": any(c["flagged"] for c in cells) or any(v["flagged"] for v in one.values())},
             }
@@ -125,10 +187,16 @@ class BalanceResult:
         t_ref = self._t(fit.unbalance_dof(c0, Uref))
         for j, pl in enumerate(camp.planes):
             m, ang = weight_of(C[j], pl.radius_mm, self.phase)
-            _, _, ca, cd = _polar_ci(C[j], float(np.real(covref[j, j])), float(t_ref[j]), self.phase)
+            # the correction is minus the reference's unbalance: the same intervals, turned by 180 deg
+            iv = _interval_keys(abs(C[j]), ang, self.profile_interval(camp.reference, j))
+            ci_mass = None if iv["ci95_g_mm"] is None else iv["ci95_g_mm"] / pl.radius_mm
+            rng = iv["ci95_g_mm_range"]
             correction[pl.name] = {"mass_g": m, "angle_deg": ang, "g_mm": abs(C[j]),
-                                   "ci95_mass_g": ca / pl.radius_mm if self.intervals else None,
-                                   "ci95_deg": cd if self.intervals else None, "radius_mm": pl.radius_mm,
+                                   "ci95_mass_g": ci_mass,
+                                   "ci95_mass_g_range": None if rng is None else
+                                   [rng[0] / pl.radius_mm, None if rng[1] is None else rng[1] / pl.radius_mm],
+                                   "ci95_deg": iv["ci95_deg"], "ci95_deg_range": iv["ci95_deg_range"],
+                                   "radius_mm": pl.radius_mm,
                                    "holes": split_to_holes(m, ang, pl.holes, pl.first_hole_deg) if pl.holes else None}
         R, Rvar = self.residual
         X0 = fit.X0
@@ -136,7 +204,7 @@ class BalanceResult:
         t_res = self._t(fit.residual_dof(c0, Uref))
         for s in range(S):
             for p in range(P):
-                a, ang, ca, _ = _polar_ci(R[s, p], float(Rvar[s, p]), float(t_res[s, p]), self.phase)
+                a, ang, ca, _ = polar_ci(R[s, p], float(Rvar[s, p]), float(t_res[s, p]), self.phase)
                 b, bang = to_phase(np.array([X0[s, p]]), self.phase)
                 predicted.append({"rpm": float(data.rpm[s]), "probe": data.probes[p], "amp": a, "phase_deg": ang,
                                   "ci95_amp": ca if self.intervals else None, "before_amp": float(b[0]),
@@ -246,7 +314,14 @@ class BalanceResult:
                         lines.append("    no explanation tried removes it" + (
                             ": a non-linear rotor (rub, clearance, loose part) is left" if part is m["influence"]
                             else ""))
-        if d["model_based"]:
+        if d["model_based"] and "planes" in d["model_based"]:
+            mb = d["model_based"]
+            parts = "; ".join(f"{pl} {v['g_mm']:.4g} g·mm at {v['angle_deg']:.0f} deg (± {v['ci95_g_mm']:.3g} g·mm)"
+                              for pl, v in mb["planes"].items())
+            lines.append(f"model-based (one run-up of {mb['run']}, two disks, no trial weight): {parts}")
+            if not mb["planes_separated"]:
+                lines.append(f"  the run-up cannot decide {mb['cannot_decide']}")
+        elif d["model_based"]:
             mb = d["model_based"]
             lines.append(f"model-based (one run-up of {mb['run']}, no trial weight): {mb['g_mm']:.4g} g·mm at "
                          f"{mb['angle_deg']:.0f} deg")

@@ -124,29 +124,43 @@ def table_of(header: list[str], rows: list[list], *, phase: str = "lag", source:
 
 
 def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float = 1.0, extra_runs: int = 1,
-                   rpms=(1200.0, 1500.0, 2000.0), level: float = 0.95) -> dict:
+                   rpms=(1200.0, 1500.0, 2000.0), every_run: bool = True) -> dict:
     """Share of seeds whose 95 % intervals hold the truth, for a linear rotor with random trial weights.
 
     Each seed draws the reference unbalance (200-1500 g·mm per plane, any angle) and, per
     plane, one trial weight plus ``extra_runs`` runs with weights on random planes (2-15 g at
     100 mm, any angle), simulates ``repeats`` acquisitions per run and speed with circular
     noise ``noise_um``, and balances.  Counted per plane: the reference's unbalance magnitude
-    within ``ci95_g_mm`` and angle within ``ci95_deg``; every run's; the influence
-    coefficients' magnitudes; how often a misfit is flagged (a false alarm here); and how
-    many seeds were refused (a plane the calibration cannot see: not counted in the shares).
+    within its profile-likelihood interval (``ref_g_mm``) and angle (``ref_deg``); the same
+    with the symmetric half-widths of the JSON (``ref_g_mm_sym``, ``ref_deg_sym``, which
+    enclose the intervals); the first-order intervals of the two-stage estimate for
+    comparison (``ref_g_mm_first_order``, ``ref_deg_first_order``); split by how far the trial
+    weights stood out of the noise (``*_low_snr``: a plane's RMS influence under 10 standard
+    errors); with ``every_run`` every calibration run's total unbalance (``runs_*``); the
+    influence coefficients' magnitudes; how often a misfit is flagged (a false alarm here);
+    how many seeds were refused (a plane the calibration cannot see: not counted in the
+    shares) and how many intervals were unbounded (counted as covering).
     """
     from . import balance_data
+    from .influence import t_quantile
+    from .result import polar_ci
     from .runs import BalanceError, Campaign, Plane, group_table
 
     names = tuple("AB"[:planes])
     probes = tuple((d, a) for d in range(planes) for a in (45.0, -45.0))
     rotor = DiskRotor(masses_kg=(20.0,) * planes, probes=probes)
-    hits = {"ref_g_mm": 0, "ref_deg": 0, "runs_g_mm": 0, "runs_deg": 0, "influence": 0,
-            "ref_g_mm_low_snr": 0, "ref_g_mm_high_snr": 0}
-    counts = {k: 0 for k in hits}
-    false_alarms = 0
-    n = 0
-    refused = 0
+    keys = ["ref_g_mm", "ref_deg", "ref_g_mm_sym", "ref_deg_sym", "ref_g_mm_first_order", "ref_deg_first_order",
+            "ref_g_mm_low_snr", "ref_deg_low_snr", "ref_g_mm_high_snr", "ref_deg_high_snr", "influence"]
+    if every_run:
+        keys += ["runs_g_mm", "runs_deg"]
+    hits = {k: 0 for k in keys}
+    counts = {k: 0 for k in keys}
+    false_alarms = n = refused = unbounded = 0
+
+    def count(key: str, ok: bool) -> None:
+        hits[key] += bool(ok)
+        counts[key] += 1
+
     for seed in seeds:
         rng = np.random.default_rng(seed)
         U = rng.uniform(200, 1500, planes) * np.exp(1j * rng.uniform(0, 2 * np.pi, planes))
@@ -166,37 +180,56 @@ def coverage_study(seeds, *, planes: int = 1, repeats: int = 3, noise_um: float 
         except BalanceError:  # a trial weight lost in the noise: refused, as a user would be
             refused += 1
             continue
-        d = res.to_dict()
-        false_alarms += not d["misfit"]["linear_model_trusted"]
+        fit = res.fit
+        false_alarms += bool(res.influence_misfit.get("flagged") or res.unbalance_misfit.get("flagged"))
         n += 1
+        band = "low" if min(v["rms_snr"] for v in res.visibility) < 10 else "high"
+        # the two-stage estimate's first-order intervals (what the package gave before the profile)
+        c0 = fit.reference_combination()
+        U2, cov2 = fit.unbalance(c0)
+        tq2 = [t_quantile(float(d)) for d in fit.unbalance_dof(c0, U2)]
         for k, run in enumerate(camp.runs):
+            if k and not every_run:
+                break
             truth = U + W[k]
-            for j, name in enumerate(names):
-                est = d["runs"][run]["unbalance"][name]
+            est = res.unbalance[run][0]
+            for j in range(planes):
                 amp, ang = to_phase(np.array([truth[j]]), "lag")
-                ok_a = abs(est["g_mm"] - amp[0]) <= est["ci95_g_mm"]
-                ok_d = abs(math.remainder(est["angle_deg"] - ang[0], 360.0)) <= est["ci95_deg"]
-                key = "ref" if k == 0 else "runs"
-                if k == 0:  # split by how far the trial weights stood out of the noise
-                    band = "low" if min(v["rms_snr"] for v in d["visibility"]) < 10 else "high"
-                    hits[f"ref_g_mm_{band}_snr"] += ok_a
-                    counts[f"ref_g_mm_{band}_snr"] += 1
-                hits[f"{key}_g_mm"] += ok_a
-                hits[f"{key}_deg"] += ok_d
-                counts[f"{key}_g_mm"] += 1
-                counts[f"{key}_deg"] += 1
-        for item in d["influence"]:
-            s = list(rpms).index(item["rpm"]) if item["rpm"] in rpms else int(np.argmin(np.abs(np.array(rpms) - item["rpm"])))
-            p = res.fit.data.probes.index(item["probe"])
-            j = names.index(item["plane"])
-            e = np.zeros(planes, dtype=complex)
-            e[j] = 1.0
-            h = rotor.response(rpms[s], e)[p]  # linear: the response to 1 g·mm
-            hits["influence"] += abs(item["amp_per_g_mm"] - abs(h)) <= item["ci95_amp_per_g_mm"]
-            counts["influence"] += 1
-    out = {k: (hits[k] / counts[k] if counts[k] else None) for k in hits}
-    out["ref_low_snr_count"] = counts["ref_g_mm_low_snr"]
-    out["misfit_flagged"] = false_alarms / n
+                e_amp, e_ang = to_phase(np.array([est[j]]), "lag")
+                iv = res.profile_interval(run, j)
+                lo, hi = iv["g_mm"]
+                below, above = iv["deg"]
+                unbounded += not math.isfinite(hi)
+                d = math.remainder(ang[0] - e_ang[0], 360.0)
+                ok_a, ok_d = lo <= amp[0] <= hi, -below <= d <= above
+                if k:
+                    count("runs_g_mm", ok_a)
+                    count("runs_deg", ok_d)
+                    continue
+                count("ref_g_mm", ok_a)
+                count("ref_deg", ok_d)
+                count(f"ref_g_mm_{band}_snr", ok_a)
+                count(f"ref_deg_{band}_snr", ok_d)
+                half_a = max(hi - e_amp[0], e_amp[0] - lo)
+                count("ref_g_mm_sym", abs(amp[0] - e_amp[0]) <= half_a)
+                count("ref_deg_sym", abs(d) <= min(180.0, max(below, above)))
+                a2, g2, ca2, cd2 = polar_ci(U2[j], float(np.real(cov2[j, j])), tq2[j], "lag")
+                count("ref_g_mm_first_order", abs(a2 - amp[0]) <= ca2)
+                count("ref_deg_first_order", abs(math.remainder(g2 - ang[0], 360.0)) <= cd2)
+        t_cell = [[t_quantile(float(v)) for v in row] for row in fit.cell_dof]
+        for s, rpm in enumerate(fit.data.rpm):
+            for p in range(len(fit.data.probes)):
+                for j in range(planes):
+                    e = np.zeros(planes, dtype=complex)
+                    e[j] = 1.0
+                    h = rotor.response(rpm, e)[p]  # linear: the response to 1 g·mm
+                    a, _, ca, _ = polar_ci(fit.H[s, p, j], float(np.real(fit.cov_theta[s, p, 1 + j, 1 + j])),
+                                            t_cell[s][p], "lag")
+                    count("influence", abs(a - abs(h)) <= ca)
+    out: dict = {k: (hits[k] / counts[k] if counts[k] else None) for k in keys}
+    out["counts"] = counts
+    out["misfit_flagged"] = false_alarms / n if n else None
     out["seeds"] = n
     out["refused"] = refused
+    out["unbounded"] = unbounded
     return out
