@@ -24,7 +24,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # generic numerics: knows nothing about rotors
     ("identifier",),
     # the declarations and the file writer everything shares
-    ("rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results", "rotor_env.progress"),
+    ("rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results", "rotor_env.progress",
+     "rotor_env.pages"),
     # data in: the ten columns, rig descriptions, readers of files and streams
     ("rotor_env.measurements",),
     # the model: regression, simulation, the on-line identification engine
@@ -47,6 +48,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 #: (nor gymnasium itself), so that the reinforcement-learning stack is never on their path
 #: (the package facade, ``rotor_env/__init__.py``, still imports the wrappers for its users).
 GYMNASIUM_FREE = ("identifier", "rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results",
+                  "rotor_env.pages",
                   "rotor_env.progress", "rotor_env.balance",
                   "rotor_env.measurements", "rotor_env.regression", "rotor_env.simulator",
                   "rotor_env.online", "rotor_env.diagnosis", "rotor_env.monitor", "rotor_env.batch",

@@ -107,9 +107,9 @@ class RigDiagnosis(Result):
 
     def report(self, path, *, overwrite: bool = False):
         """The waveform diagnosis's report (in s and rpm), with the 1X vectors' section first."""
-        import html
+        from ..pages import esc
 
-        head = (f"<h2>Rig recording</h2><p>{html.escape(str(self.record.source))}: {self.record.rig.model} model, "
+        head = (f"<h2>Rig recording</h2><p>{esc(str(self.record.source))}: {esc(self.record.rig.model)} model, "
                 f"{self.record.rpm.min():.0f}&ndash;{self.record.rpm.max():.0f} rpm; the model's time unit "
                 f"1/{self.w_ref:.6g} s (natural frequency {self.w_ref / SPEED_UNITS['rpm']:.1f} rpm).</p>"
                 + self.vectors.html_section(level=3) + "<h2>Waveforms</h2>")
@@ -123,25 +123,14 @@ class RigDiagnosis(Result):
         return self.diagnosis.figures(self.w_ref / SPEED_UNITS["rpm"], "speed [rpm]")
 
     def _oe_report(self, path, head: str, overwrite: bool):
-        import base64
-        import html
-        import io
+        from ..outputs import check_writable
+        from ..pages import esc, figure_tag, write_page
 
-        import matplotlib.pyplot as plt
-
-        from ..outputs import atomic_write_text
-
-        imgs = []
-        for name, fig in self._figures().items():
-            buf = io.BytesIO()
-            fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-            plt.close(fig)
-            imgs.append(f"<figure><img alt='{html.escape(name)}' src='data:image/png;base64,"
-                        f"{base64.b64encode(buf.getvalue()).decode()}'/></figure>")
-        body = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>rotor-id rig diagnosis</title></head>"
-                f"<body><h1>Diagnosis: {html.escape(self.verdict)}</h1>{head}"
-                f"<pre>{html.escape(self.diagnosis.summary())}</pre>{''.join(imgs)}</body></html>")
-        return atomic_write_text(path, body, overwrite=overwrite)
+        path = check_writable(path, overwrite=overwrite)  # before the figures are drawn
+        imgs = "".join(f"<figure>{figure_tag(fig, name)}</figure>" for name, fig in self._figures().items())
+        body = (f"<h1>Diagnosis: {esc(self.verdict)}</h1>{head}"
+                f"<pre>{esc(self.diagnosis.summary())}</pre>{imgs}")
+        return write_page(path, "rotor-id rig diagnosis", body, overwrite=overwrite)
 
     def save_figures(self, folder, *, overwrite: bool = True):
         if not isinstance(self.diagnosis, OutputErrorDiagnosis):
