@@ -32,6 +32,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("rotor_env.regression", "rotor_env.simulator", "rotor_env.reference", "rotor_env.slow_roll",
      "rotor_env.online", "rotor_env.rig_simulation"),
     # what is built on the model: diagnosis, monitoring, environments and their wrapper
+    # figures: they draw what the layers below computed
+    ("rotor_env.plots",),
     ("rotor_env.diagnosis", "rotor_env.monitor", "rotor_env.envs", "rotor_env.wrappers",
      "rotor_env.paper", "rotor_env.effects_doc", "rotor_env.batch", "rotor_env.fleet", "rotor_env.balance",
      "rotor_env.ray_cluster"),
@@ -48,7 +50,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 #: (nor gymnasium itself), so that the reinforcement-learning stack is never on their path
 #: (the package facade, ``rotor_env/__init__.py``, still imports the wrappers for its users).
 GYMNASIUM_FREE = ("identifier", "rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results",
-                  "rotor_env.pages",
+                  "rotor_env.pages", "rotor_env.plots",
                   "rotor_env.progress", "rotor_env.balance",
                   "rotor_env.measurements", "rotor_env.regression", "rotor_env.simulator",
                   "rotor_env.online", "rotor_env.diagnosis", "rotor_env.monitor", "rotor_env.batch",

@@ -318,7 +318,7 @@ class VectorDiagnosis(Result):
 
     def plot_bode(self, ax=None):
         """Bode plot: measured 1X vectors and the start and final models, per probe."""
-        from .field_plots import plot_bode
+        from ..plots import plot_bode
 
         rpm, meas, models = self.bode_data()
         return plot_bode(rpm, meas, models, speed_unit="rpm", amp_unit=_unit_label(self.table.amp_unit),
@@ -326,7 +326,7 @@ class VectorDiagnosis(Result):
 
     def plot_polar(self, ax=None):
         """Polar plot of the same vectors."""
-        from .field_plots import plot_polar
+        from ..plots import plot_polar
 
         rpm, meas, models = self.bode_data()
         return plot_polar(rpm, meas, models, speed_unit="rpm", amp_unit=_unit_label(self.table.amp_unit),
@@ -353,7 +353,7 @@ class VectorDiagnosis(Result):
 
     def plot_campbell(self, ax=None):
         """Whirl frequencies of the final model against speed, the 1x line and the criticals."""
-        from .field_plots import plot_campbell
+        from ..plots import plot_campbell
         from .synchronous import whirl_modes
 
         rpm = np.linspace(0.0, float(self.table.rpm.max()) * 1.1, 120)

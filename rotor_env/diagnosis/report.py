@@ -9,11 +9,13 @@ from typing import ClassVar
 
 import numpy as np
 
+from .. import plots
 from ..effects import whirl_effects
+from ..measurements.vectors import order_map
 from ..outputs import atomic_write, check_writable
 from ..pages import esc, figure_tag, write_page
-from . import field_plots as fp
-from .orders import autocorrelation, complex_rows, failing_windows, first_rows, order_map
+from . import field
+from .orders import autocorrelation, complex_rows, failing_windows, first_rows
 from .verdict import VERDICT_TEXT
 
 #: the diagnosis page's own rules: the verdict's box and colours, the missing effects' rows
@@ -34,7 +36,7 @@ class PlotUnits:
 
     ``t_plot = t * time_factor``; a rate ``w`` (rad per model time unit) is
     ``w * rate_factor`` rad per plotted time unit, shown in ``speed_unit`` (see
-    :mod:`.field_plots`).  Without a known time unit everything stays dimensionless.
+    :mod:`rotor_env.plots.field`).  Without a known time unit everything stays dimensionless.
     """
 
     time_factor: float = 1.0
@@ -48,11 +50,11 @@ class PlotUnits:
 
     def speed(self, w):
         """A spin speed (rad per model time unit) in :attr:`speed_unit`."""
-        return fp.speed_from_rad(np.asarray(w, dtype=float) * self.rate_factor, self.speed_unit)
+        return plots.speed_from_rad(np.asarray(w, dtype=float) * self.rate_factor, self.speed_unit)
 
     def frequency(self, w):
         """A whirl frequency (rad per model time unit) in the Campbell/waterfall unit."""
-        return fp.frequency_from_rad(np.asarray(w, dtype=float) * self.rate_factor, self.speed_unit)
+        return plots.frequency_from_rad(np.asarray(w, dtype=float) * self.rate_factor, self.speed_unit)
 
     def label(self, quantity: str, unit: str | None = None) -> str:
         unit = unit or "dimensionless"
@@ -229,7 +231,7 @@ class DiagnosisFigures:
         m = self.data.meas
         u = self.plot_units()
         speeds, orders, amp = order_map(m.t, m.phi, u.speed(m.phi_dot), complex_rows(comp.residual, self.equation))
-        speeds, amp = fp.by_speed(speeds, amp)  # pcolormesh wants monotonic rows (else a UserWarning)
+        speeds, amp = plots.by_speed(speeds, amp)  # pcolormesh wants monotonic rows (else a UserWarning)
         if amp.size:
             mesh = ax.pcolormesh(orders, speeds, np.log10(amp + 1e-12), shading="nearest", cmap="viridis")
             fig.colorbar(mesh, ax=ax, label="log10 amplitude (dimensionless moment)")
@@ -408,7 +410,7 @@ class DiagnosisFigures:
             def one(rec):
                 out, t_mid, speed = {}, None, None
                 for label, col in channels.items():
-                    t_mid, speed, v = fp.order_vectors(rec.t, rec[col], rec.phi)
+                    t_mid, speed, v = field.order_vectors(rec.t, rec[col], rec.phi)
                     out[label] = v[1]
                 return t_mid, speed, out
 
@@ -425,14 +427,14 @@ class DiagnosisFigures:
         measured, starting and final model (free runs); ``ax``: a pair of axes."""
         u = self.plot_units()
         v = self._vectors()
-        return fp.plot_bode(u.speed(v["speed"]), v["measured"], v["models"], speed_unit=u.speed_unit,
+        return plots.plot_bode(u.speed(v["speed"]), v["measured"], v["models"], speed_unit=u.speed_unit,
                             amp_unit=u.amp_unit, phase=phase, ax=ax)
 
     def plot_polar(self, ax=None, phase: str = "lag"):
         """Polar (Nyquist) plot of the same 1X vectors, speeds written along the curves."""
         u = self.plot_units()
         v = self._vectors()
-        return fp.plot_polar(u.speed(v["speed"]), v["measured"], v["models"], speed_unit=u.speed_unit,
+        return plots.plot_polar(u.speed(v["speed"]), v["measured"], v["models"], speed_unit=u.speed_unit,
                              amp_unit=u.amp_unit, phase=phase, ax=ax)
 
     def orbit_times(self) -> list[float]:
@@ -457,7 +459,7 @@ class DiagnosisFigures:
         u = self.plot_units()
         m = self.data.raw
         times = self.orbit_times() if at_times is None else list(np.atleast_1d(at_times))
-        return fp.plot_orbit(u.time(m.t), m.theta_y, m.theta_x, m.phi, [u.time(x) for x in times],
+        return plots.plot_orbit(u.time(m.t), m.theta_y, m.theta_x, m.phi, [u.time(x) for x in times],
                              filtered=filtered, unit=u.amp_unit, speed_unit=u.speed_unit, time_unit=u.time_unit,
                              labels=("θy (horizontal)", "θx (vertical)"), ax=ax)
 
@@ -466,17 +468,17 @@ class DiagnosisFigures:
         8-revolution blocks against speed, signed (forward/backward whirl), 1x/2x lines."""
         u = self.plot_units()
         m = self.data.raw
-        return fp.plot_waterfall(u.time(m.t), m.theta_y + 1j * m.theta_x, m.phi, x_axis=x_axis,
+        return plots.plot_waterfall(u.time(m.t), m.theta_y + 1j * m.theta_x, m.phi, x_axis=x_axis,
                                  speed_unit=u.speed_unit, amp_unit=u.amp_unit, ax=ax)
 
     def whirl_model(self, n: int = 200) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """``(speed, {branch: signed frequency})`` of the final model's linear fixed-frame part
         (stiffness, damping, ``ip``, support anisotropy, cross-coupling) over the measured
-        speed range, in model units (:func:`.field_plots.whirl_frequencies`)."""
+        speed range, in model units (:func:`.field.whirl_frequencies`)."""
         phys = self.after.physical
         top = float(np.max(np.abs(self.data.meas.phi_dot)))
         speed = np.linspace(0.0, top, n)
-        return speed, fp.whirl_frequencies(speed, phys.get("k", 1.0), phys.get("c", 0.0), self.ip,
+        return speed, field.whirl_frequencies(speed, phys.get("k", 1.0), phys.get("c", 0.0), self.ip,
                                            phys.get("support_anisotropy", 0.0), phys.get("cross_coupling", 0.0))
 
     def plot_campbell(self, ax=None):
@@ -486,8 +488,8 @@ class DiagnosisFigures:
         u = self.plot_units()
         speed, branches = self.whirl_model()
         m = self.data.raw
-        ps, pw = fp.whirl_peaks(m.t, m.theta_y + 1j * m.theta_x, m.phi)
-        fig = fp.plot_campbell(u.speed(speed), {k: u.frequency(w) for k, w in branches.items()},
+        ps, pw = field.whirl_peaks(m.t, m.theta_y + 1j * m.theta_x, m.phi)
+        fig = plots.plot_campbell(u.speed(speed), {k: u.frequency(w) for k, w in branches.items()},
                                measured_peaks=(u.speed(ps), u.frequency(pw)) if len(ps) else None,
                                speed_unit=u.speed_unit, ax=ax)
         covered = [e for e in whirl_effects() if e in self.model]
@@ -496,7 +498,7 @@ class DiagnosisFigures:
             + (", " + ", ".join(covered) if covered else "") + ")", fontsize=9)
         return fig
 
-    def parameter_tracks(self, forgetting: float | None = None) -> fp.ParameterTracks:
+    def parameter_tracks(self, forgetting: float | None = None) -> field.ParameterTracks:
         """The recursive identifier run over the (prefiltered) data with the final model's
         effects: coefficients after every sample and per-effect significance.  Default
         ``forgetting``: a memory of a tenth of the record (at least 2000 rows)."""
@@ -505,18 +507,18 @@ class DiagnosisFigures:
         if key not in cache:
             rows = len(self.data.meas) * (2 if self.equation == "both" else 1)
             lam = forgetting if forgetting is not None else 1.0 - 1.0 / max(2000.0, rows / 10.0)
-            cache[key] = fp.parameter_tracks(self.data.meas, self.model, self.ip, lam, alpha=self.alpha,
+            cache[key] = field.parameter_tracks(self.data.meas, self.model, self.ip, lam, alpha=self.alpha,
                                              equation=self.equation)
         return cache[key]
 
     def monitor_alarms(self) -> list[dict] | None:
         """The on-line monitor's calibrated alarms over the record with the final model's
-        effects (:func:`.field_plots.monitor_alarms`; model time), None where the monitor
+        effects (:func:`.field.monitor_alarms`; model time), None where the monitor
         cannot watch this model (an effect with a scanned parameter)."""
         cache = self._field_cache()
         if "alarms" not in cache:
             try:
-                cache["alarms"] = fp.monitor_alarms(self.data.meas, self.model, self.ip)
+                cache["alarms"] = field.monitor_alarms(self.data.meas, self.model, self.ip)
             except (ValueError, KeyError, NotImplementedError):
                 cache["alarms"] = None
         return cache["alarms"]
@@ -538,11 +540,11 @@ class DiagnosisFigures:
         if alarms is not None:
             alarms = [{**a, "t_onset": float(u.time(a["t_onset"])), "t_alarm": float(u.time(a["t_alarm"]))}
                       for a in alarms]
-            fig = fp.plot_parameter_tracks(u.time(tr.t), tr.coefficients, alarms=alarms, truth=truth,
+            fig = plots.plot_parameter_tracks(u.time(tr.t), tr.coefficients, alarms=alarms, truth=truth,
                                            groups=tr.groups, final=final, time_unit=u.time_unit, ax=ax)
             marks = "dotted: onset of an alarm of the monitor's calibrated test"
         else:  # the identifier's own flags (white-residual F tests), said so
-            fig = fp.plot_parameter_tracks(u.time(tr.t), tr.coefficients, significance=tr.significant,
+            fig = plots.plot_parameter_tracks(u.time(tr.t), tr.coefficients, significance=tr.significant,
                                            truth=truth, groups=tr.groups, final=final, time_unit=u.time_unit, ax=ax)
             marks = "bold where the effect-last F test (white residual) is significant"
         _first_axes(fig, ax).set_title(
