@@ -9,7 +9,7 @@ from ..pages import esc, write_page
 
 def write_report(monitor, path, *, source: str, overwrite: bool = False, clock=None) -> None:
     """Write the run's events and final state to ``path`` (every value escaped); ``clock``
-    (a rig stream's :class:`~.rig_stream.RigClock`): times in s and speeds in rpm."""
+    (a rig stream's :class:`~rotor_env.measurements.rig_stream.RigClock`): times in s and speeds in rpm."""
     s = monitor.summary()
 
     def when(t: float, speed: float | None = None) -> str:
