@@ -30,10 +30,10 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from rotor_env.measurements.stream import read_ahead
 from rotor_env.monitor import Monitor, StreamReader
 from rotor_env.monitor.detector import CusumDesign
 from rotor_env.monitor.scenarios import HEALTHY_ROTORS, delay, growing_crack, healthy, with_crack
-from rotor_env.monitor.stream import read_ahead
 from rotor_env.regression import build_rows
 
 NOISE = 5e-4
@@ -105,7 +105,7 @@ def _rig_throughput(folder: Path, repeats: int) -> dict[str, float]:
     by 4, noise-free) through :class:`RigStream` alone and into the monitor; peak memory for 1x
     and 4x the run."""
     from rotor_env.measurements.rig import Rig
-    from rotor_env.monitor.rig_stream import RigStream
+    from rotor_env.measurements.rig_stream import RigStream
     from rotor_env.params import RotorParams
     from rotor_env.rig_simulation import simulate_rig
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from rotor_env.diagnosis import LIBRARY_CANDIDATES, diagnose
-from rotor_env.diagnosis.field_plots import whirl_frequencies
+from rotor_env.diagnosis.field import whirl_frequencies
 from rotor_env.diagnosis.synchronous import VECTOR_EFFECTS
 from rotor_env.effects import EFFECTS, PHYSICAL_EFFECTS, Effect, Parameter, register_effect
 from rotor_env.effects_doc import effects_markdown

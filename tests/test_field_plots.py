@@ -22,8 +22,8 @@ import pytest
 from matplotlib.collections import QuadMesh
 from matplotlib.figure import Figure
 
-from rotor_env.diagnosis import diagnose
-from rotor_env.diagnosis import field_plots as fp
+from rotor_env import plots as fp  # the drawing
+from rotor_env.diagnosis import diagnose, field  # field: what the plots draw, computed
 from rotor_env.diagnosis.report import speed_axis_functions
 from rotor_env.params import Crack, RotorParams
 from rotor_env.regression import RegressionSpec, regression_arrays
@@ -55,7 +55,7 @@ def test_order_vectors_recover_known_vectors_and_speeds():
     t, phi, a, w0 = _shaft()
     amp, lag = 35.0, math.radians(70.0)
     x = amp * np.cos(phi - lag) + 8.0 * np.cos(2 * phi + 0.4) + 3.0  # 1X, 2X and a DC offset
-    t_mid, speed, vec = fp.order_vectors(t, x, phi, orders=(1, 2))
+    t_mid, speed, vec = field.order_vectors(t, x, phi, orders=(1, 2))
     np.testing.assert_allclose(vec[1], amp * np.exp(-1j * lag), atol=1e-9)  # lead: x = Re(X e^{i phi})
     np.testing.assert_allclose(vec[2], 8.0 * np.exp(0.4j), atol=1e-9)
     # the keyphasor marks: phi = 2 pi k exactly, t from the quadratic
@@ -71,7 +71,7 @@ def test_order_vectors_recover_known_vectors_and_speeds():
 def test_order_vectors_of_a_complex_orbit_give_signed_orders():
     t, phi, *_ = _shaft()
     z = 2.0 * np.exp(1j * (phi + 0.3)) + 0.5 * np.exp(-1j * (phi - 1.0))  # forward + backward 1X
-    _, _, vec = fp.order_vectors(t, z, phi, orders=(1, -1))
+    _, _, vec = field.order_vectors(t, z, phi, orders=(1, -1))
     np.testing.assert_allclose(vec[1], 2.0 * np.exp(0.3j), atol=1e-9)
     np.testing.assert_allclose(vec[-1], 0.5 * np.exp(1.0j), atol=1e-9)
 
@@ -95,7 +95,7 @@ def test_phase_unwraps_through_a_resonance_and_folds_a_circling_vector():
 def test_whirl_frequencies_match_the_isotropic_closed_form(k):
     speed = np.linspace(0.0, 4.0, 41)
     ip = 0.3
-    w = fp.whirl_frequencies(speed, k, 0.0, ip)
+    w = field.whirl_frequencies(speed, k, 0.0, ip)
     root = np.sqrt(ip**2 * speed**2 + 4 * k)
     np.testing.assert_allclose(w["forward"], (ip * speed + root) / 2, rtol=1e-10)
     np.testing.assert_allclose(w["backward"], (ip * speed - root) / 2, rtol=1e-10)  # negative: backward
@@ -105,7 +105,7 @@ def test_whirl_frequencies_with_damping_and_cross_coupling_match_the_complex_roo
     # z'' + (c - i ip W) z' + (k - i q) z = 0: z = e^{lambda t}, Im(lambda) the signed whirl
     speed = np.linspace(0.0, 3.0, 13)
     k, c, ip, q = 1.2, 0.08, 0.4, 0.03
-    w = fp.whirl_frequencies(speed, k, c, ip, cross_coupling=q)
+    w = field.whirl_frequencies(speed, k, c, ip, cross_coupling=q)
     for j, s in enumerate(speed):
         roots = np.sort(np.roots([1.0, c - 1j * ip * s, k - 1j * q]).imag)[::-1]
         assert w["forward"][j] == pytest.approx(roots[0], rel=1e-9)
@@ -114,18 +114,18 @@ def test_whirl_frequencies_with_damping_and_cross_coupling_match_the_complex_roo
 
 def test_whirl_frequencies_of_anisotropic_supports_split_the_natural_frequency():
     # at rest, no damping: straight-line modes at sqrt(k +- delta)
-    w = fp.whirl_frequencies([0.0], 1.0, 0.0, 0.0, anisotropy=0.1)
+    w = field.whirl_frequencies([0.0], 1.0, 0.0, 0.0, anisotropy=0.1)
     got = sorted(abs(float(w[b][0])) for b in ("forward", "backward"))
     assert got == pytest.approx([math.sqrt(0.9), math.sqrt(1.1)], rel=1e-10)
     # spinning with a gyroscopic rotor: the forward branch rises, the backward one falls
-    w = fp.whirl_frequencies([0.0, 2.0], 1.0, 0.01, 0.3, anisotropy=0.1)
+    w = field.whirl_frequencies([0.0, 2.0], 1.0, 0.01, 0.3, anisotropy=0.1)
     assert w["forward"][1] > abs(w["forward"][0]) and abs(w["backward"][1]) < abs(w["backward"][0])
 
 
 def test_campbell_marks_the_critical_speed_where_1x_crosses_the_forward_branch():
     ip = 0.3
     speed = np.linspace(0.0, 3.0, 301)
-    fig = fp.plot_campbell(speed, fp.whirl_frequencies(speed, 1.0, 0.0, ip), speed_unit="dimensionless")
+    fig = fp.plot_campbell(speed, field.whirl_frequencies(speed, 1.0, 0.0, ip), speed_unit="dimensionless")
     try:
         labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
         crit = [s for s in labels if s.startswith("critical 1x forward")]
@@ -149,7 +149,7 @@ def test_campbell_marks_the_critical_speed_where_1x_crosses_the_forward_branch()
 # ------------------------------------------------------------------ Bode, polar, orbit, waterfall
 def test_bode_draws_amplitude_and_lag_phase_on_the_callers_axes():
     t, phi, *_ = _shaft()
-    _, speed, vx = fp.order_vectors(t, 12.0 * np.cos(phi - math.radians(30.0)), phi)
+    _, speed, vx = field.order_vectors(t, 12.0 * np.cos(phi - math.radians(30.0)), phi)
     model = {"final model": {"probe": 0.5 * vx[1]}}
     fig, axes = plt.subplots(2, 1)
     try:
@@ -167,7 +167,7 @@ def test_bode_draws_amplitude_and_lag_phase_on_the_callers_axes():
 
 def test_polar_plots_the_vector_itself_with_speed_labels():
     t, phi, *_ = _shaft()
-    _, speed, vx = fp.order_vectors(t, 5.0 * np.cos(phi + 1.0), phi)
+    _, speed, vx = field.order_vectors(t, 5.0 * np.cos(phi + 1.0), phi)
     fig = fp.plot_polar(speed, {"probe": vx[1]}, n_labels=4, speed_unit="rad/s")
     try:
         line = fig.axes[0].lines[0]
@@ -249,7 +249,7 @@ def test_waterfall_signed_orders_amplitudes_and_rpm():
 def test_parameter_tracks_end_at_the_batch_least_squares_and_follow_a_crack():
     res = _diagnosis()
     meas, model = res.data.meas, res.model
-    full = fp.parameter_tracks(meas, model, res.ip, forgetting=1.0)
+    full = field.parameter_tracks(meas, model, res.ip, forgetting=1.0)
     spec = RegressionSpec(effects=model, equation="both")
     X, y = regression_arrays(spec, np.ascontiguousarray(meas.data), res.ip)
     ref, *_ = np.linalg.lstsq(X, y, rcond=None)
@@ -260,7 +260,7 @@ def test_parameter_tracks_end_at_the_batch_least_squares_and_follow_a_crack():
     ref_half, *_ = np.linalg.lstsq(X[: 2 * (half + 1)], y[: 2 * (half + 1)], rcond=None)
     np.testing.assert_allclose([full.coefficients[c][half] for c in spec.columns], ref_half, rtol=1e-6, atol=1e-9)
     # with forgetting the crack shows: D about 0 before it opens, about its value after
-    tr = fp.parameter_tracks(meas, model, res.ip, forgetting=0.998)
+    tr = field.parameter_tracks(meas, model, res.ip, forgetting=0.998)
     D, t = tr.coefficients["D"], tr.t
     assert abs(np.median(D[(t > 80) & (t < CRACK.time)])) < 0.01
     assert np.median(D[t > 140]) == pytest.approx(CRACK.D, abs=0.01)
@@ -385,7 +385,7 @@ def test_order_vectors_agree_with_the_measurements_order_track():
     vectors = pytest.importorskip("rotor_env.measurements.vectors")
     t, phi, *_ = _shaft(20001)
     x = 7.0 * np.cos(phi - 0.9) + 1.5 * np.cos(2 * phi)
-    t_mid, speed, mine = fp.order_vectors(t, x, phi)
+    t_mid, speed, mine = field.order_vectors(t, x, phi)
     theirs = vectors.order_track(t, x, phi)
     n = min(len(speed), len(theirs.speed))
     np.testing.assert_allclose(theirs.speed[:n], speed[:n], rtol=1e-6)

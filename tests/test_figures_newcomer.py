@@ -13,7 +13,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from rotor_env.diagnosis import field_plots as fp
+from rotor_env import plots as fp  # the drawing
+from rotor_env.diagnosis import field  # what it draws, computed
 
 
 def _circling(n=300):
@@ -56,10 +57,10 @@ def test_parameter_tracks_marks_from_the_monitors_test_and_truth_dashed():
     params = RotorParams().replace(crack=Crack(250.0, 0.04))
     meas = simulate(params, t_end=300.0, dt=0.01)
     model = ("unbalance", "asymmetry", "viscous_damping", "nonlinear_stiffness", "structural_damping")
-    alarms = fp.monitor_alarms(meas, model, params.ip)
+    alarms = field.monitor_alarms(meas, model, params.ip)
     assert [a["effect"] for a in alarms] == ["asymmetry"]
     assert 245.0 <= alarms[0]["t_onset"] <= 256.0
-    tracks = fp.parameter_tracks(meas, model, params.ip, 0.9995, checkpoints=50)
+    tracks = field.parameter_tracks(meas, model, params.ip, 0.9995, checkpoints=50)
     truth = true_coefficients(params, model, tracks.t)
     fig = fp.plot_parameter_tracks(tracks.t, tracks.coefficients, alarms=alarms, truth=truth, groups=tracks.groups)
     try:

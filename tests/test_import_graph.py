@@ -24,13 +24,16 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # generic numerics: knows nothing about rotors
     ("identifier",),
     # the declarations and the file writer everything shares
-    ("rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results", "rotor_env.progress"),
+    ("rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results", "rotor_env.progress",
+     "rotor_env.pages"),
     # data in: the ten columns, rig descriptions, readers of files and streams
     ("rotor_env.measurements",),
     # the model: regression, simulation, the on-line identification engine
     ("rotor_env.regression", "rotor_env.simulator", "rotor_env.reference", "rotor_env.slow_roll",
      "rotor_env.online", "rotor_env.rig_simulation"),
     # what is built on the model: diagnosis, monitoring, environments and their wrapper
+    # figures: they draw what the layers below computed
+    ("rotor_env.plots",),
     ("rotor_env.diagnosis", "rotor_env.monitor", "rotor_env.envs", "rotor_env.wrappers",
      "rotor_env.paper", "rotor_env.effects_doc", "rotor_env.batch", "rotor_env.fleet", "rotor_env.balance",
      "rotor_env.ray_cluster"),
@@ -47,6 +50,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 #: (nor gymnasium itself), so that the reinforcement-learning stack is never on their path
 #: (the package facade, ``rotor_env/__init__.py``, still imports the wrappers for its users).
 GYMNASIUM_FREE = ("identifier", "rotor_env.effects", "rotor_env.params", "rotor_env.outputs", "rotor_env.results",
+                  "rotor_env.pages", "rotor_env.plots",
                   "rotor_env.progress", "rotor_env.balance",
                   "rotor_env.measurements", "rotor_env.regression", "rotor_env.simulator",
                   "rotor_env.online", "rotor_env.diagnosis", "rotor_env.monitor", "rotor_env.batch",

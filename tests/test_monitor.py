@@ -14,11 +14,11 @@ import pytest
 from scipy import stats
 
 from rotor_env.measurements.files import MeasurementError, load_measurements
+from rotor_env.measurements.stream import read_ahead
 from rotor_env.monitor import Monitor, StreamReader, cusum_threshold, simulate_arl
 from rotor_env.monitor.detector import chi2_sf, norm_ppf
 from rotor_env.monitor.kernel import downdate_row
 from rotor_env.monitor.scenarios import HEALTHY_ROTORS, growing_crack, healthy, with_crack
-from rotor_env.monitor.stream import read_ahead
 
 NOISE = 5e-4
 

@@ -12,10 +12,10 @@ import pytest
 
 pytest.importorskip("ray")
 
+from rotor_env.measurements.stream import StreamReader
 from rotor_env.monitor.core import Monitor, MonitorConfig
 from rotor_env.monitor.fleet import monitor_streams
 from rotor_env.monitor.scenarios import with_crack
-from rotor_env.monitor.stream import StreamReader
 
 OPTIONS = {"arl0": 1e6, "block": 200}
 

@@ -18,9 +18,9 @@ import pytest
 
 from rotor_env.measurements.files import MeasurementError
 from rotor_env.measurements.rig import SPEED_UNITS, load_rig
+from rotor_env.measurements.rig_stream import DC_GAP_REVOLUTIONS, RigStream
 from rotor_env.measurements.waveforms import WaveformError, load_waveforms
 from rotor_env.monitor import Monitor
-from rotor_env.monitor.rig_stream import DC_GAP_REVOLUTIONS, RigStream
 from rotor_env.params import Crack, RotorParams
 from rotor_env.rig_simulation import simulate_rig
 

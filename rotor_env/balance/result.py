@@ -391,38 +391,24 @@ class BalanceResult:
 
     def report(self, path, *, overwrite: bool = False):
         """A self-contained HTML report: summary, correction, misfit, figures."""
-        import base64
-        import html
-        import io
+        from ..outputs import check_writable
+        from ..pages import esc, figure_tags, write_page
 
-        import matplotlib.pyplot as plt
-
-        from ..outputs import atomic_write_text, check_writable
-
-        path = check_writable(path, overwrite=overwrite)
-        imgs = []
-        for name, fig in self.figures().items():
-            buf = io.BytesIO()
-            fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-            plt.close(fig)
-            imgs.append(f'<h2>{html.escape(name)}</h2><img alt="{html.escape(name)}" style="max-width:100%" '
-                        f'src="data:image/png;base64,{base64.b64encode(buf.getvalue()).decode()}">')
+        path = check_writable(path, overwrite=overwrite)  # before the figures are drawn
+        imgs = figure_tags(self.figures(), heading=2)
         d = self.to_dict()
         def ci(c: dict) -> str:
             return "" if c["ci95_mass_g"] is None else f"± {c['ci95_mass_g']:.3g} g, ± {c['ci95_deg']:.0f} deg"
 
-        rows = "".join(f"<tr><td>{html.escape(pl)}</td><td>{c['mass_g']:.4g}</td><td>{c['angle_deg']:.1f}</td>"
+        rows = "".join(f"<tr><td>{esc(pl)}</td><td>{c['mass_g']:.4g}</td><td>{c['angle_deg']:.1f}</td>"
                        f"<td>{ci(c)}</td></tr>" for pl, c in d["correction"].items())
         trusted = d["misfit"]["linear_model_trusted"]
         verdict = "linear model holds" if trusted else "linear model does NOT hold: see the misfit"
-        doc = ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>rotor-id: balancing</title>"
-               "<style>body{font-family:sans-serif;max-width:1000px;margin:auto}td,th{border:1px solid #bbb;"
-               "padding:3px 8px}table{border-collapse:collapse}</style></head><body>"
-               "<h1>rotor-id balancing (influence coefficients)</h1>"
-               f"<section class='verdict verdict-{'explained' if trusted else 'unexplained'}'><p><b>"
-               f"{html.escape(verdict)}</b></p></section>"
-               "<h2>Correction</h2><table><tr><th>plane</th><th>mass [g]</th>"
-               f"<th>angle [deg, {html.escape(d['phase_convention'])}]</th><th>95 %</th></tr>{rows}</table>"
-               f"<p>{html.escape(d['angle_convention'])}. {html.escape(COVERS)}.</p>"
-               f"<h2>Summary</h2><pre>{html.escape(self.summary())}</pre>" + "".join(imgs) + "</body></html>")
-        return atomic_write_text(path, doc, overwrite=overwrite)
+        body = ("<h1>rotor-id balancing (influence coefficients)</h1>"
+                f"<section class='verdict verdict-{'explained' if trusted else 'unexplained'}'><p><b>"
+                f"{esc(verdict)}</b></p></section>"
+                "<h2>Correction</h2><table><tr><th>plane</th><th>mass [g]</th>"
+                f"<th>angle [deg, {esc(d['phase_convention'])}]</th><th>95 %</th></tr>{rows}</table>"
+                f"<p>{esc(d['angle_convention'])}. {esc(COVERS)}.</p>"
+                f"<h2>Summary</h2><pre>{esc(self.summary())}</pre>" + imgs)
+        return write_page(path, "rotor-id: balancing", body, overwrite=overwrite)

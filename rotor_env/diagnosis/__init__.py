@@ -49,10 +49,11 @@ residual energy is kept and reported (``candidates[*].scan``, and in the paramet
 and its test pays a Bonferroni factor of the values tried, as the onset scan does.
 """
 
+from ..measurements.vectors import order_map
 from .candidates import Candidate
 from .compare import Comparison, compare
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES, Model, effect_from_function, load_user_effect
-from .orders import autocorrelation, complex_rows, failing_windows, noise_floor, order_map
+from .orders import autocorrelation, complex_rows, failing_windows, noise_floor
 from .result import Diagnosis
 from .workflow import diagnose, fit
 

@@ -13,9 +13,10 @@ from identifier.hac import wald_group_test
 from identifier.segments import SplitScan
 
 from ..effects import EFFECTS
+from ..measurements.vectors import order_map
 from ..regression import RegressionSpec, regression_columns
 from .compare import Comparison, WindowData, compare, known_values, model_design
-from .orders import complex_rows, order_map
+from .orders import complex_rows
 
 
 # ------------------------------------------------------------------ candidates

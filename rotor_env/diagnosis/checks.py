@@ -38,8 +38,9 @@ import numpy as np
 from identifier.hac import chi2_log10_sf, hac_covariance
 
 from ..effects import EFFECTS
+from ..measurements.vectors import order_map
 from .compare import Comparison, WindowData, compare, known_values, model_design
-from .orders import complex_rows, order_map
+from .orders import complex_rows
 
 __all__ = ["CONSISTENCY_LOG10_P", "CONSISTENCY_SPREAD", "check_candidate"]
 

@@ -205,9 +205,9 @@ class AngleDiagnosis(Result):
 
     def report(self, path, *, overwrite: bool = False):
         """An HTML page: the verdict, the summary and the output-error figures."""
-        import html
+        from ..pages import esc
 
-        head = f"<h2>Angle record</h2><p>{html.escape(str(self.source))}: rates estimated, decided on the output error.</p>"
+        head = f"<h2>Angle record</h2><p>{esc(self.source)}: rates estimated, decided on the output error.</p>"
         return self.diagnosis.write_report(path, head, title="rotor-id angle diagnosis", overwrite=overwrite,
                                            verdict=self.verdict, extra_text=self.summary())
 

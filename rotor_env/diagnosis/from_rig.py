@@ -112,9 +112,9 @@ class RigDiagnosis(Result):
 
     def report(self, path, *, overwrite: bool = False):
         """The waveform diagnosis's report (in s and rpm), with the 1X vectors' section first."""
-        import html
+        from ..pages import esc
 
-        head = (f"<h2>Rig recording</h2><p>{html.escape(str(self.record.source))}: {self.record.rig.model} model, "
+        head = (f"<h2>Rig recording</h2><p>{esc(str(self.record.source))}: {esc(self.record.rig.model)} model, "
                 f"{self.record.rpm.min():.0f}&ndash;{self.record.rpm.max():.0f} rpm; the model's time unit "
                 f"1/{self.w_ref:.6g} s (natural frequency {self.w_ref / SPEED_UNITS['rpm']:.1f} rpm).</p>"
                 + self.vectors.html_section(level=3) + "<h2>Waveforms</h2>")
@@ -123,9 +123,6 @@ class RigDiagnosis(Result):
         if hasattr(self.diagnosis, "_verdict_html"):
             return self.diagnosis.report(path, overwrite=overwrite, preamble=head)
         return self.diagnosis.report(path, overwrite=overwrite)
-
-    def _figures(self) -> dict:
-        return self.diagnosis.figures(self.w_ref / SPEED_UNITS["rpm"], "speed [rpm]")
 
     def _oe_report(self, path, head: str, overwrite: bool):
         return self.diagnosis.write_report(path, head, title="rotor-id rig diagnosis", verdict=self.verdict,

@@ -326,7 +326,7 @@ class VectorDiagnosis(Result):
 
     def plot_bode(self, ax=None):
         """Bode plot: measured 1X vectors and the start and final models, per probe."""
-        from .field_plots import plot_bode
+        from ..plots import plot_bode
 
         rpm, meas, models = self.bode_data()
         return plot_bode(rpm, meas, models, speed_unit="rpm", amp_unit=_unit_label(self.table.amp_unit),
@@ -334,7 +334,7 @@ class VectorDiagnosis(Result):
 
     def plot_polar(self, ax=None):
         """Polar plot of the same vectors."""
-        from .field_plots import plot_polar
+        from ..plots import plot_polar
 
         rpm, meas, models = self.bode_data()
         return plot_polar(rpm, meas, models, speed_unit="rpm", amp_unit=_unit_label(self.table.amp_unit),
@@ -361,7 +361,7 @@ class VectorDiagnosis(Result):
 
     def plot_campbell(self, ax=None):
         """Whirl frequencies of the final model against speed, the 1x line and the criticals."""
-        from .field_plots import plot_campbell
+        from ..plots import plot_campbell
         from .synchronous import whirl_modes
 
         rpm = np.linspace(0.0, float(self.table.rpm.max()) * 1.1, 120)
@@ -404,43 +404,31 @@ class VectorDiagnosis(Result):
 
     def report(self, path, *, overwrite: bool = False):
         """A self-contained HTML report: verdict, criticals, Bode, polar, residual, Campbell."""
-        from ..outputs import atomic_write_text, check_writable
+        from ..outputs import check_writable
+        from ..pages import write_page
 
         path = check_writable(path, overwrite=overwrite)
-        doc = ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>rotor-id: 1X vectors</title>"
-               "<style>body{font-family:sans-serif;max-width:1000px;margin:auto}td,th{border:1px solid #bbb;"
-               "padding:3px 8px}table{border-collapse:collapse}</style></head><body>"
-               "<h1>rotor-id diagnosis of order-tracked vectors</h1>" + self.html_section() + "</body></html>")
-        return atomic_write_text(path, doc, overwrite=overwrite)
+        return write_page(path, "rotor-id: 1X vectors",
+                          "<h1>rotor-id diagnosis of order-tracked vectors</h1>" + self.html_section(),
+                          overwrite=overwrite)
 
     def html_section(self, level: int = 2) -> str:
         """The vectors' verdict, criticals and figures as an HTML fragment."""
-        import base64
-        import html
-        import io
+        from ..pages import esc, figure_tags
 
-        import matplotlib.pyplot as plt
-
-        imgs = []
-        for name, fig in self.figures().items():
-            buf = io.BytesIO()
-            fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-            plt.close(fig)
-            imgs.append(f'<h{level + 1}>{html.escape(name)}</h{level + 1}><img alt="{html.escape(name)}" '
-                        f'style="max-width:100%" src="data:image/png;base64,'
-                        f'{base64.b64encode(buf.getvalue()).decode()}">')
+        imgs = figure_tags(self.figures(), heading=level + 1)
         d = self.to_dict()
         crit = "".join(f"<tr><td>{c['rpm']:.1f}</td><td>{c['damping_ratio']:.4f}</td></tr>" for c in d["criticals"])
         unb = d.get("unbalance")
         unb_html = ""
         if unb:
-            unb_html = (f"<p>Unbalance: eccentricity {unb['eccentricity']:.4g} {html.escape(d['amplitude_unit'])} at "
+            unb_html = (f"<p>Unbalance: eccentricity {unb['eccentricity']:.4g} {esc(d['amplitude_unit'])} at "
                         f"{unb['angle_deg_lag']:.0f} deg (lag from the keyphasor)"
                         + (f", {unb['g_mm']:.4g} g·mm" if unb.get("g_mm") is not None else "") + ".</p>")
-        return (f"<section class='verdict verdict-{html.escape(self.verdict)}'><p><b>1X vectors: "
-                f"{html.escape(self.verdict)}</b></p><pre>{html.escape(self.summary())}</pre></section>"
+        return (f"<section class='verdict verdict-{esc(self.verdict)}'><p><b>1X vectors: "
+                f"{esc(self.verdict)}</b></p><pre>{esc(self.summary())}</pre></section>"
                 f"<h{level}>Critical speeds</h{level}><table><tr><th>rpm</th><th>damping ratio</th></tr>{crit}</table>"
-                + unb_html + "".join(imgs))
+                + unb_html + imgs)
 
 
 def _unit_label(unit: str) -> str:

@@ -167,25 +167,15 @@ class OutputErrorDiagnosis:
     def write_report(self, path, head: str, *, title: str, verdict: str | None = None, extra_text: str | None = None,
                      overwrite: bool = False, speed_scale: float = 1.0, speed_unit: str = "speed (model units)"):
         """One HTML page: the verdict, ``head`` (HTML), the summary and the figures inline."""
-        import base64
-        import html
-        import io
+        from ..outputs import check_writable
+        from ..pages import esc, figure_tag, write_page
 
-        import matplotlib.pyplot as plt
-
-        from ..outputs import atomic_write_text
-
-        imgs = []
-        for name, fig in self.figures(speed_scale, speed_unit).items():
-            buf = io.BytesIO()
-            fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-            plt.close(fig)
-            imgs.append(f"<figure><img alt='{html.escape(name)}' src='data:image/png;base64,"
-                        f"{base64.b64encode(buf.getvalue()).decode()}'/></figure>")
-        body = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title></head>"
-                f"<body><h1>Diagnosis: {html.escape(verdict or self.verdict)}</h1>{head}"
-                f"<pre>{html.escape(extra_text or self.summary())}</pre>{''.join(imgs)}</body></html>")
-        return atomic_write_text(path, body, overwrite=overwrite)
+        path = check_writable(path, overwrite=overwrite)  # before the figures are drawn
+        imgs = "".join(f"<figure>{figure_tag(fig, name)}</figure>"
+                       for name, fig in self.figures(speed_scale, speed_unit).items())
+        body = (f"<h1>Diagnosis: {esc(verdict or self.verdict)}</h1>{head}"
+                f"<pre>{esc(extra_text or self.summary())}</pre>{imgs}")
+        return write_page(path, title, body, overwrite=overwrite)
 
     def to_dict(self) -> dict:
         # residual and floor as the probes see them: the analysis band's RMS scaled to the

@@ -19,47 +19,6 @@ def complex_rows(values: np.ndarray, equation: str) -> np.ndarray:
     return values.astype(complex)
 
 
-def order_map(
-    t: np.ndarray, phi: np.ndarray, speed: np.ndarray, signal: np.ndarray,
-    revolutions: int = 8, max_order: float = 4.0,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Amplitude spectrum in rotation orders over windows of ``revolutions`` turns.
-
-    Returns ``(speeds, orders, amplitude)`` with ``amplitude[window, order]``.  The
-    signal is resampled on a uniform spin-angle grid (order tracking), so a component
-    at ``k`` times the spin frequency stays in bin ``k`` while the speed changes.
-
-    Orders count with the direction of rotation: for a rotor turning backwards
-    (``phi`` decreasing) the angle is ``-phi`` and the signal is conjugated, so the
-    unbalance is order +1 either way.  The angle must progress overall; brief
-    reversals (encoder noise, a stall) are held at the angle already reached, because
-    the resampling needs a monotone angle.
-    """
-    phi = np.asarray(phi, dtype=float)
-    signal = np.asarray(signal)
-    if phi.size and phi[-1] < phi[0]:  # turning backwards: count angle and orders with the rotation
-        phi, signal = -phi, np.conj(signal)
-    phi = np.maximum.accumulate(phi) if phi.size else phi
-    span = 2 * np.pi * revolutions
-    n_per = 64 * revolutions
-    starts = np.arange(phi[0], phi[-1] - span, span / 2) if phi.size else np.empty(0)
-    speeds, rows = [], []
-    freqs = np.fft.fftfreq(n_per, d=1.0 / (64))  # cycles per revolution
-    keep = np.abs(freqs) <= max_order
-    order = np.argsort(freqs[keep])
-    for s in starts:
-        grid = s + np.arange(n_per) * (span / n_per)
-        re = np.interp(grid, phi, signal.real)
-        im = np.interp(grid, phi, signal.imag)
-        z = (re + 1j * im) * np.hanning(n_per)
-        spec = np.abs(np.fft.fft(z)) / (n_per / 2)
-        rows.append(spec[keep][order])
-        speeds.append(float(np.interp(s + span / 2, phi, speed)))
-    if not rows:
-        return np.empty(0), freqs[keep][order], np.empty((0, int(keep.sum())))
-    return np.array(speeds), freqs[keep][order], np.array(rows)
-
-
 def autocorrelation(x: np.ndarray, max_lag: int) -> np.ndarray:
     x = x - x.mean()
     n = len(x)

@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import base64
-import html
-import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,11 +9,25 @@ from typing import ClassVar
 
 import numpy as np
 
+from .. import plots
 from ..effects import whirl_effects
-from ..outputs import atomic_write, atomic_write_text, check_writable
-from . import field_plots as fp
-from .orders import autocorrelation, complex_rows, failing_windows, first_rows, order_map
+from ..measurements.vectors import order_map
+from ..outputs import atomic_write, check_writable
+from ..pages import esc, figure_tag, write_page
+from . import field
+from .orders import autocorrelation, complex_rows, failing_windows, first_rows
 from .verdict import VERDICT_TEXT
+
+#: the diagnosis page's own rules: the verdict's box and colours, the missing effects' rows
+_STYLE = ("td,th{font-size:13px}tr.missing{background:#fde0dc}"
+          "section.verdict{border:2px solid #888;border-radius:6px;padding:.3em 1em;margin:1em 0}"
+          "p.verdict-word{font-size:2em;font-weight:bold;margin:.2em 0}"
+          ".verdict-explained,.verdict-explained_after_adding{border-color:#2a8a3a!important}"
+          ".verdict-partly_explained{border-color:#d98a00!important}"
+          ".verdict-unexplained{border-color:#c0392b!important}"
+          ".verdict-explained p.verdict-word,.verdict-explained_after_adding p.verdict-word{color:#2a8a3a}"
+          ".verdict-partly_explained p.verdict-word{color:#d98a00}"
+          ".verdict-unexplained p.verdict-word{color:#c0392b}")
 
 
 @dataclass(frozen=True)
@@ -25,7 +36,7 @@ class PlotUnits:
 
     ``t_plot = t * time_factor``; a rate ``w`` (rad per model time unit) is
     ``w * rate_factor`` rad per plotted time unit, shown in ``speed_unit`` (see
-    :mod:`.field_plots`).  Without a known time unit everything stays dimensionless.
+    :mod:`rotor_env.plots.field`).  Without a known time unit everything stays dimensionless.
     """
 
     time_factor: float = 1.0
@@ -39,11 +50,11 @@ class PlotUnits:
 
     def speed(self, w):
         """A spin speed (rad per model time unit) in :attr:`speed_unit`."""
-        return fp.speed_from_rad(np.asarray(w, dtype=float) * self.rate_factor, self.speed_unit)
+        return plots.speed_from_rad(np.asarray(w, dtype=float) * self.rate_factor, self.speed_unit)
 
     def frequency(self, w):
         """A whirl frequency (rad per model time unit) in the Campbell/waterfall unit."""
-        return fp.frequency_from_rad(np.asarray(w, dtype=float) * self.rate_factor, self.speed_unit)
+        return plots.frequency_from_rad(np.asarray(w, dtype=float) * self.rate_factor, self.speed_unit)
 
     def label(self, quantity: str, unit: str | None = None) -> str:
         unit = unit or "dimensionless"
@@ -220,7 +231,7 @@ class DiagnosisFigures:
         m = self.data.meas
         u = self.plot_units()
         speeds, orders, amp = order_map(m.t, m.phi, u.speed(m.phi_dot), complex_rows(comp.residual, self.equation))
-        speeds, amp = fp.by_speed(speeds, amp)  # pcolormesh wants monotonic rows (else a UserWarning)
+        speeds, amp = plots.by_speed(speeds, amp)  # pcolormesh wants monotonic rows (else a UserWarning)
         if amp.size:
             mesh = ax.pcolormesh(orders, speeds, np.log10(amp + 1e-12), shading="nearest", cmap="viridis")
             fig.colorbar(mesh, ax=ax, label="log10 amplitude (dimensionless moment)")
@@ -399,7 +410,7 @@ class DiagnosisFigures:
             def one(rec):
                 out, t_mid, speed = {}, None, None
                 for label, col in channels.items():
-                    t_mid, speed, v = fp.order_vectors(rec.t, rec[col], rec.phi)
+                    t_mid, speed, v = field.order_vectors(rec.t, rec[col], rec.phi)
                     out[label] = v[1]
                 return t_mid, speed, out
 
@@ -416,14 +427,14 @@ class DiagnosisFigures:
         measured, starting and final model (free runs); ``ax``: a pair of axes."""
         u = self.plot_units()
         v = self._vectors()
-        return fp.plot_bode(u.speed(v["speed"]), v["measured"], v["models"], speed_unit=u.speed_unit,
+        return plots.plot_bode(u.speed(v["speed"]), v["measured"], v["models"], speed_unit=u.speed_unit,
                             amp_unit=u.amp_unit, phase=phase, ax=ax)
 
     def plot_polar(self, ax=None, phase: str = "lag"):
         """Polar (Nyquist) plot of the same 1X vectors, speeds written along the curves."""
         u = self.plot_units()
         v = self._vectors()
-        return fp.plot_polar(u.speed(v["speed"]), v["measured"], v["models"], speed_unit=u.speed_unit,
+        return plots.plot_polar(u.speed(v["speed"]), v["measured"], v["models"], speed_unit=u.speed_unit,
                              amp_unit=u.amp_unit, phase=phase, ax=ax)
 
     def orbit_times(self) -> list[float]:
@@ -448,7 +459,7 @@ class DiagnosisFigures:
         u = self.plot_units()
         m = self.data.raw
         times = self.orbit_times() if at_times is None else list(np.atleast_1d(at_times))
-        return fp.plot_orbit(u.time(m.t), m.theta_y, m.theta_x, m.phi, [u.time(x) for x in times],
+        return plots.plot_orbit(u.time(m.t), m.theta_y, m.theta_x, m.phi, [u.time(x) for x in times],
                              filtered=filtered, unit=u.amp_unit, speed_unit=u.speed_unit, time_unit=u.time_unit,
                              labels=("θy (horizontal)", "θx (vertical)"), ax=ax)
 
@@ -457,17 +468,17 @@ class DiagnosisFigures:
         8-revolution blocks against speed, signed (forward/backward whirl), 1x/2x lines."""
         u = self.plot_units()
         m = self.data.raw
-        return fp.plot_waterfall(u.time(m.t), m.theta_y + 1j * m.theta_x, m.phi, x_axis=x_axis,
+        return plots.plot_waterfall(u.time(m.t), m.theta_y + 1j * m.theta_x, m.phi, x_axis=x_axis,
                                  speed_unit=u.speed_unit, amp_unit=u.amp_unit, ax=ax)
 
     def whirl_model(self, n: int = 200) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """``(speed, {branch: signed frequency})`` of the final model's linear fixed-frame part
         (stiffness, damping, ``ip``, support anisotropy, cross-coupling) over the measured
-        speed range, in model units (:func:`.field_plots.whirl_frequencies`)."""
+        speed range, in model units (:func:`.field.whirl_frequencies`)."""
         phys = self.after.physical
         top = float(np.max(np.abs(self.data.meas.phi_dot)))
         speed = np.linspace(0.0, top, n)
-        return speed, fp.whirl_frequencies(speed, phys.get("k", 1.0), phys.get("c", 0.0), self.ip,
+        return speed, field.whirl_frequencies(speed, phys.get("k", 1.0), phys.get("c", 0.0), self.ip,
                                            phys.get("support_anisotropy", 0.0), phys.get("cross_coupling", 0.0))
 
     def plot_campbell(self, ax=None):
@@ -477,8 +488,8 @@ class DiagnosisFigures:
         u = self.plot_units()
         speed, branches = self.whirl_model()
         m = self.data.raw
-        ps, pw = fp.whirl_peaks(m.t, m.theta_y + 1j * m.theta_x, m.phi)
-        fig = fp.plot_campbell(u.speed(speed), {k: u.frequency(w) for k, w in branches.items()},
+        ps, pw = field.whirl_peaks(m.t, m.theta_y + 1j * m.theta_x, m.phi)
+        fig = plots.plot_campbell(u.speed(speed), {k: u.frequency(w) for k, w in branches.items()},
                                measured_peaks=(u.speed(ps), u.frequency(pw)) if len(ps) else None,
                                speed_unit=u.speed_unit, ax=ax)
         covered = [e for e in whirl_effects() if e in self.model]
@@ -487,7 +498,7 @@ class DiagnosisFigures:
             + (", " + ", ".join(covered) if covered else "") + ")", fontsize=9)
         return fig
 
-    def parameter_tracks(self, forgetting: float | None = None) -> fp.ParameterTracks:
+    def parameter_tracks(self, forgetting: float | None = None) -> field.ParameterTracks:
         """The recursive identifier run over the (prefiltered) data with the final model's
         effects: coefficients after every sample and per-effect significance.  Default
         ``forgetting``: a memory of a tenth of the record (at least 2000 rows)."""
@@ -496,18 +507,18 @@ class DiagnosisFigures:
         if key not in cache:
             rows = len(self.data.meas) * (2 if self.equation == "both" else 1)
             lam = forgetting if forgetting is not None else 1.0 - 1.0 / max(2000.0, rows / 10.0)
-            cache[key] = fp.parameter_tracks(self.data.meas, self.model, self.ip, lam, alpha=self.alpha,
+            cache[key] = field.parameter_tracks(self.data.meas, self.model, self.ip, lam, alpha=self.alpha,
                                              equation=self.equation)
         return cache[key]
 
     def monitor_alarms(self) -> list[dict] | None:
         """The on-line monitor's calibrated alarms over the record with the final model's
-        effects (:func:`.field_plots.monitor_alarms`; model time), None where the monitor
+        effects (:func:`.field.monitor_alarms`; model time), None where the monitor
         cannot watch this model (an effect with a scanned parameter)."""
         cache = self._field_cache()
         if "alarms" not in cache:
             try:
-                cache["alarms"] = fp.monitor_alarms(self.data.meas, self.model, self.ip)
+                cache["alarms"] = field.monitor_alarms(self.data.meas, self.model, self.ip)
             except (ValueError, KeyError, NotImplementedError):
                 cache["alarms"] = None
         return cache["alarms"]
@@ -529,11 +540,11 @@ class DiagnosisFigures:
         if alarms is not None:
             alarms = [{**a, "t_onset": float(u.time(a["t_onset"])), "t_alarm": float(u.time(a["t_alarm"]))}
                       for a in alarms]
-            fig = fp.plot_parameter_tracks(u.time(tr.t), tr.coefficients, alarms=alarms, truth=truth,
+            fig = plots.plot_parameter_tracks(u.time(tr.t), tr.coefficients, alarms=alarms, truth=truth,
                                            groups=tr.groups, final=final, time_unit=u.time_unit, ax=ax)
             marks = "dotted: onset of an alarm of the monitor's calibrated test"
         else:  # the identifier's own flags (white-residual F tests), said so
-            fig = fp.plot_parameter_tracks(u.time(tr.t), tr.coefficients, significance=tr.significant,
+            fig = plots.plot_parameter_tracks(u.time(tr.t), tr.coefficients, significance=tr.significant,
                                            truth=truth, groups=tr.groups, final=final, time_unit=u.time_unit, ax=ax)
             marks = "bold where the effect-last F test (white residual) is significant"
         _first_axes(fig, ax).set_title(
@@ -588,10 +599,10 @@ class DiagnosisFigures:
         template = VERDICT_TEXT.get(verdict)
         sentence = template.format(ratio=self.rms_ratio_after, floor=self.noise_floor) if template else ""
         parts = [
-            f"<section id='verdict' class='verdict verdict-{_e(verdict)}'>",
+            f"<section id='verdict' class='verdict verdict-{esc(verdict)}'>",
             "<h2>Verdict</h2>",
-            f"<p class='verdict-word'>{_e(verdict)}</p>",
-            f"<p class='verdict-text'>{_e(sentence)}</p>",
+            f"<p class='verdict-word'>{esc(verdict)}</p>",
+            f"<p class='verdict-text'>{esc(sentence)}</p>",
             f"<p class='verdict-ratio'>Final residual RMS: <b>{_num(self.rms_ratio_after, '.3g')}&times;</b> the "
             f"noise floor ({_num(self.noise_floor, '.3g')}); starting model: "
             f"{_num(self.rms_ratio_before, '.3g')}&times;.</p>",
@@ -607,7 +618,7 @@ class DiagnosisFigures:
             parts.append("<h3>What is left, by rotation order</h3>")
             if orders:
                 rows = "".join(
-                    f"<tr><td>{_e(_order(o.get('order')))}</td><td>{_e(o.get('direction', ''))}</td>"
+                    f"<tr><td>{esc(_order(o.get('order')))}</td><td>{esc(o.get('direction', ''))}</td>"
                     f"<td>{_num(100 * o.get('share', math.nan), '.0f')} %</td></tr>"
                     for o in orders
                 )
@@ -629,15 +640,15 @@ class DiagnosisFigures:
             else:
                 parts.append("<p>No band of time stands above the floor.</p>")
         rows = "".join(
-            f"<tr><td>{_e(r.get('effect', ''))}</td><td>{_e(r.get('rule', ''))}</td>"
-            + (f"<td>{_e(r['round'])}</td>" if r.get("round") else "") + "</tr>"
+            f"<tr><td>{esc(r.get('effect', ''))}</td><td>{esc(r.get('rule', ''))}</td>"
+            + (f"<td>{esc(r['round'])}</td>" if r.get("round") else "") + "</tr>"
             for r in self.rejected
         ) or "<tr><td colspan=3>none</td></tr>"
         parts.append("<h3>Candidates turned down</h3>"
                      "<table class='rejected'><tr><th>effect</th><th>rule that rejected it</th>"
                      f"<th>round (the last that tried it)</th></tr>{rows}</table>")
         if self.notes:
-            items = "".join(f"<li>{_e(n)}</li>" for n in self.notes)
+            items = "".join(f"<li>{esc(n)}</li>" for n in self.notes)
             parts.append(f"<h3>Notes</h3><ul class='notes'>{items}</ul>")
         parts.append("</section>")
         return "\n".join(parts)
@@ -654,17 +665,17 @@ class DiagnosisFigures:
         for ev in evidence:
             name = ev.get("effect", "")
             declared = ev.get("declared_orders") or []
-            parts.append(f"<div class='lookalike-evidence' data-effect='{_e(name)}'>")
-            parts.append(f"<h3>{_e(name)}</h3>")
+            parts.append(f"<div class='lookalike-evidence' data-effect='{esc(name)}'>")
+            parts.append(f"<h3>{esc(name)}</h3>")
             parts.append(
-                f"<p class='declared'>Added: <b>{_e(name)}</b>; it declares the order lines "
-                f"{_e(_signed_orders(declared))} (log10 p {_num(ev.get('log10_p'), '.4g')}, removes "
+                f"<p class='declared'>Added: <b>{esc(name)}</b>; it declares the order lines "
+                f"{esc(_signed_orders(declared))} (log10 p {_num(ev.get('log10_p'), '.4g')}, removes "
                 f"{_pct(ev.get('energy_drop'), '.1f')} of the equation error, free-run fit "
                 f"{_num(ev.get('fit_gain'), '+.1f')} points).</p>")
             orders = ev.get("residual_orders") or []
             if orders:
                 rows = "".join(
-                    f"<tr><td>{_e(_order(o.get('order')))}</td><td>{_e(o.get('direction', ''))}</td>"
+                    f"<tr><td>{esc(_order(o.get('order')))}</td><td>{esc(o.get('direction', ''))}</td>"
                     f"<td>{_pct(o.get('share'), '.0f')}</td></tr>"
                     for o in orders
                 )
@@ -681,7 +692,7 @@ class DiagnosisFigures:
                     f"<td>{_num(b.get('amplitude'), '.3g')}</td></tr>"
                     for b in by_speed
                 )
-                parts.append(f"<p>Amplitude of its main line ({_e(_signed_orders([main]))}) in the residual, "
+                parts.append(f"<p>Amplitude of its main line ({esc(_signed_orders([main]))}) in the residual, "
                              "by speed band:</p>"
                              "<table class='lookalike-speed'><tr><th>speed band</th><th>amplitude</th></tr>"
                              f"{rows}</table>")
@@ -690,16 +701,16 @@ class DiagnosisFigures:
                 scanned = ", ".join(f"{k} = {_num(v, '.4g')}" for k, v in (where.get("scanned") or {}).items())
                 first, last = where.get("first_contact") or {}, where.get("last_contact") or {}
                 parts.append(
-                    f"<p class='acts-where'>Scanned: {_e(scanned)}. {_e(where['reading'])}. Where it acts the "
+                    f"<p class='acts-where'>Scanned: {esc(scanned)}. {esc(where['reading'])}. Where it acts the "
                     f"residual held {_pct(where.get('backward_1x_share'), '.0f')} backward 1x and "
                     f"{_pct(where.get('half_order_share'), '.0f')} at 1/2x; contact from speed "
                     f"{_num(first.get('speed'), '.3g')} to {_num(last.get('speed'), '.3g')} in this "
-                    f"{_e(where.get('sweep', ''))}.</p>")
+                    f"{esc(where.get('sweep', ''))}.</p>")
             rows = "".join(
-                f"<tr><td>{_e(lk.get('effect', ''))}</td><td>{_e(lk.get('status', ''))}</td>"
+                f"<tr><td>{esc(lk.get('effect', ''))}</td><td>{esc(lk.get('status', ''))}</td>"
                 f"<td>{_num(lk.get('log10_p'), '.4g')}</td>"
                 f"<td>{_pct(lk.get('energy_drop'), '.2g')}</td>"
-                f"<td>{_e(_signed_orders(lk['declared_orders'])) if lk.get('declared_orders') is not None else '-'}"
+                f"<td>{esc(_signed_orders(lk['declared_orders'])) if lk.get('declared_orders') is not None else '-'}"
                 "</td></tr>"
                 for lk in ev.get("lookalikes") or []
             )
@@ -715,26 +726,15 @@ class DiagnosisFigures:
         ``preamble``: HTML put after the title (a rig diagnosis puts its 1X-vector section
         there: criticals, Bode and polar plots in the rig's units).
         """
-        import matplotlib.pyplot as plt
-
         path = check_writable(path, overwrite=overwrite)  # before the figures are drawn
-        imgs = {}
-        for name, fig in self.figures().items():
-            buf = io.BytesIO()
-            fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-            plt.close(fig)
-            imgs[name] = base64.b64encode(buf.getvalue()).decode()
-
-        def img(name):
-            return f'<img alt="{name}" src="data:image/png;base64,{imgs[name]}">'
-
+        imgs = {name: figure_tag(fig, name) for name, fig in self.figures().items()}
 
         decided = self.decisions()
         cand_rows = "".join(
-            f"<tr class='{'missing' if c.effect in self.missing else ''}'><td>{_e(c.effect)}</td><td>{c.F:.4g}</td>"
+            f"<tr class='{'missing' if c.effect in self.missing else ''}'><td>{esc(c.effect)}</td><td>{c.F:.4g}</td>"
             f"<td>{c.log10_p:.4g}</td><td>{c.rms_after:.4g}</td><td>{fit_cell(c)}</td>"
-            f"<td>{c.correlation:.2f}</td><td>{c.order_overlap:.2f}</td><td>{_e(decided.get(c.effect, 'not decided'))}</td>"
-            f"<td>{html.escape(c.story)}</td></tr>"
+            f"<td>{c.correlation:.2f}</td><td>{c.order_overlap:.2f}</td><td>{esc(decided.get(c.effect, 'not decided'))}</td>"
+            f"<td>{esc(c.story)}</td></tr>"
             for c in self.candidates
         )
         win_rows = "".join(
@@ -743,7 +743,7 @@ class DiagnosisFigures:
         ) or "<tr><td colspan=3>none</td></tr>"
         bias = self.after.eiv_bias
         coef_rows = "".join(
-            f"<tr><td>{_e(c)}</td><td>{v:.5g}</td><td>{s:.2g}</td>"
+            f"<tr><td>{esc(c)}</td><td>{v:.5g}</td><td>{s:.2g}</td>"
             + (f"<td>{bias[j]:+.2g}</td>" if bias is not None else "") + "</tr>"
             for j, (c, v, s) in enumerate(
                 zip(self.after.columns, self.after.coefficients, self.after.standard_errors, strict=True))
@@ -755,67 +755,55 @@ class DiagnosisFigures:
                       "natural frequency)." if u.time_unit == "s" else
                       "Dimensionless units: time in 1/natural frequency, speed in rad per time unit, angles in rad.")
         missing = ", ".join(
-            f"<b>{_e(e)}</b>" + (f" (from t ≈ {self.onset[e]:.0f})" if self.onset.get(e) is not None else "")
+            f"<b>{esc(e)}</b>" + (f" (from t ≈ {self.onset[e]:.0f})" if self.onset.get(e) is not None else "")
             for e in self.missing
         ) or "none"
-        doc = f"""<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">
-<title>rotor-id diagnosis</title>
-<style>body{{font-family:sans-serif;max-width:1000px;margin:auto;padding:1em;color:#222}}
-table{{border-collapse:collapse;margin:.5em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;font-size:13px}}
-tr.missing{{background:#fde0dc}}
-section.verdict{{border:2px solid #888;border-radius:6px;padding:.3em 1em;margin:1em 0}}
-p.verdict-word{{font-size:2em;font-weight:bold;margin:.2em 0}}
-.verdict-explained,.verdict-explained_after_adding{{border-color:#2a8a3a!important}}
-.verdict-partly_explained{{border-color:#d98a00!important}}.verdict-unexplained{{border-color:#c0392b!important}}
-.verdict-explained p.verdict-word,.verdict-explained_after_adding p.verdict-word{{color:#2a8a3a}}
-.verdict-partly_explained p.verdict-word{{color:#d98a00}}.verdict-unexplained p.verdict-word{{color:#c0392b}}img{{max-width:100%}}pre{{background:#f4f4f4;padding:.5em}}</style></head><body>
-<h1>rotor-id diagnosis</h1>
+        body = f"""<h1>rotor-id diagnosis</h1>
 {preamble}
 {self._verdict_html()}
 {self._lookalikes_html()}
 <h2>Summary</h2>
-<p>Data: {html.escape(str(self.source))}; ip = {self.ip:g}; alpha = {self.alpha:g}; informative window t &ge; {self.t_start:g}.</p>
-<p>Starting model: {_e(', '.join(self.start_model))}. Missing: {missing}. Final model: {_e(', '.join(self.model))}.</p>
+<p>Data: {esc(str(self.source))}; ip = {self.ip:g}; alpha = {self.alpha:g}; informative window t &ge; {self.t_start:g}.</p>
+<p>Starting model: {esc(', '.join(self.start_model))}. Missing: {missing}. Final model: {esc(', '.join(self.model))}.</p>
 <table><tr><th></th><th>equation RMS</th><th>R²</th><th>free-run fit %</th></tr>
 <tr><td>before</td><td>{self.before.rms:.4g}</td><td>{self.before.r2:.4f}</td><td>{self.before.fit_percent:.1f}</td></tr>
 <tr><td>after</td><td>{self.after.rms:.4g}</td><td>{self.after.r2:.4f}</td><td>{self.after.fit_percent:.1f}</td></tr></table>
-<h2>Compare</h2>{img('compare')}
-<h2>Where it fails</h2>{img('residual')}{img('order_map')}{img('autocorrelation')}
+<h2>Compare</h2>{imgs['compare']}
+<h2>Where it fails</h2>{imgs['residual']}{imgs['order_map']}{imgs['autocorrelation']}
 <p>Windows where the residual stands above the noise floor ({self.noise_floor:.3g}):</p>
 <table><tr><th>t start</th><th>t end</th><th>peak RMS / floor</th></tr>{win_rows}</table>
-<h2>Which effect is missing</h2>{img('candidates')}
+<h2>Which effect is missing</h2>{imgs['candidates']}
 <table><tr><th>effect</th><th>F</th><th>log10 p</th><th>RMS after</th><th>fit % after</th><th>corr.</th><th>order overlap</th><th>decision (round)</th><th>physical story</th></tr>{cand_rows}</table>
-<h2>Before and after</h2>{img('before_after')}
+<h2>Before and after</h2>{imgs['before_after']}
 <p>The final model's residual (shaded where it still stands above 2&times; the noise floor):</p>
-{img('residual_after')}
+{imgs['residual_after']}
 <table class='coefficients'>{coef_head}{coef_rows}</table>
 <h2>Bode and polar plots</h2>
 <p>1X vectors per revolution (least squares against the spin angle between keyphasor marks) of the
 measured angles and of the starting and final models' free runs; phase lag as instruments show it
-(x = A cos(&phi; &minus; lag)). {_e(units_note)}</p>
-{img('bode')}{img('polar')}
+(x = A cos(&phi; &minus; lag)). {esc(units_note)}</p>
+{imgs['bode']}{imgs['polar']}
 <h2>Orbits</h2>
 <p>&theta;x (vertical) against &theta;y (horizontal) over one revolution below, at and above the critical:
 unfiltered (mean removed) and 1X-filtered; the dot is the keyphasor (&phi; a multiple of 2&pi;), the arrow
 the direction of the whirl.</p>
-{img('orbit')}
+{imgs['orbit']}
 <h2>Waterfall</h2>
 <p>Spectra of the measured z = &theta;y + i &theta;x over 8-revolution blocks against speed: positive
 frequencies whirl forward, negative backward; dotted: the 1x and 2x lines.</p>
-{img('waterfall')}
+{imgs['waterfall']}
 <h2>Campbell diagram</h2>
 <p>Whirl frequencies of the final model's linear fixed-frame part against speed, the 1x and 2x lines and
 the criticals where 1x crosses a branch; dots: free-whirl peaks found in the measured waterfall.
 A rotating-frame asymmetry (crack) would need a Floquet analysis and is not in these branches.</p>
-{img('campbell')}
+{imgs['campbell']}
 <h2>Parameter tracks</h2>
 <p>The recursive QR identifier run over the data with the final model's effects: every coefficient
 after every sample, bold where its effect's F test is significant (white-residual test: optimistic on
 coloured residuals; the verdict uses HAC tests), and the batch estimate &plusmn; 95 % at the end.</p>
-{img('parameter_tracks')}
-<pre>{html.escape(self.summary())}</pre>
-</body></html>"""
-        return atomic_write_text(path, doc, overwrite=overwrite)
+{imgs['parameter_tracks']}
+<pre>{esc(self.summary())}</pre>"""
+        return write_page(path, "rotor-id diagnosis", body, extra_style=_STYLE, overwrite=overwrite)
 
 
 def _first_axes(fig, ax):
@@ -858,11 +846,6 @@ def _pct(x, fmt: str) -> str:
     except (TypeError, ValueError):
         return "-"
     return f"{format(v, fmt)} %" if math.isfinite(v) else "-"
-
-
-def _e(x) -> str:
-    """``x`` as text, HTML-escaped (quotes too): for every string from data or user input."""
-    return html.escape(str(x))
 
 
 def _num(x, fmt: str) -> str:

@@ -45,13 +45,10 @@ class NotIdentifiableResult(Result):
         return []
 
     def report(self, path, *, overwrite: bool = False):
-        import html
+        from ..pages import esc, write_page
 
-        from ..outputs import atomic_write_text
-
-        doc = ("<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>rotor-id diagnosis</title>"
-               f"</head><body><h1>rotor-id diagnosis</h1><pre>{html.escape(self.summary())}</pre></body></html>")
-        return atomic_write_text(path, doc, overwrite=overwrite)
+        return write_page(path, "rotor-id diagnosis",
+                          f"<h1>rotor-id diagnosis</h1><pre>{esc(self.summary())}</pre>", overwrite=overwrite)
 
 
 # ------------------------------------------------------------------ the result

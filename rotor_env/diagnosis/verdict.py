@@ -29,8 +29,9 @@ import math
 
 import numpy as np
 
+from ..measurements.vectors import order_map
 from .compare import Comparison, WindowData, known_values, model_design
-from .orders import complex_rows, failing_windows, noise_floor, order_map
+from .orders import complex_rows, failing_windows, noise_floor
 
 __all__ = ["FLOOR_RATIO", "NUMERICAL_FLOOR", "VERDICTS", "VERDICT_TEXT", "estimate_noise_floor", "order_lines", "verdict_of"]
 

@@ -32,7 +32,8 @@ from scipy.signal import savgol_filter
 
 from .core import COLUMNS, Measurements
 
-__all__ = ["REQUIRED", "MeasurementError", "derive_rates", "load_measurements", "read_table"]
+__all__ = ["REQUIRED", "MeasurementError", "check_finite", "check_header", "check_tilt", "check_time", "derive_rates",
+           "first_step", "load_measurements", "read_table"]
 
 REQUIRED: tuple[str, ...] = ("t", "phi", "theta_x", "theta_y")
 #: derived column -> (source column, derivative order)
@@ -47,10 +48,110 @@ DERIVABLE: dict[str, tuple[str, int]] = {
 MIN_ROWS = 20
 #: relative tolerance on the spacing of ``t``
 UNIFORM_RTOL = 1e-3
+#: a measurement cell beyond this is no measurement: squares and products of it overflow
+MAX_ABS = 1e30
 
 
 class MeasurementError(ValueError):
     """A measurement file that cannot be used as it is."""
+
+
+# ------------------------------------------------------------------ validation
+# One validation for every reader: a whole file (load_measurements, a rig's waveforms), a
+# stream read in chunks (measurements.stream, measurements.rig_stream) and the monitor's
+# arrays.  A refused row raises ``error`` with ``.row``, its index in the rows given, and
+# a message that names the source, the file line (``lines``; without them "row r of
+# SOURCE"), the column and the value.
+def _where(source, lines, r: int) -> str:
+    return f"{source}, line {lines[r]}" if lines is not None else f"row {r} of {source}"
+
+
+def _refuse(error: type[Exception], message: str, row: int) -> Exception:
+    exc = error(message)
+    exc.row = row
+    return exc
+
+
+def check_header(source, header: Sequence[str], *, required: Sequence[str] = REQUIRED,
+                 missing_hint: str | None = None) -> None:
+    """Every name once and every ``required`` column there (a model column's likely
+    misspelling named); ``missing_hint``: where the required names come from, said instead."""
+    dup = {h for h in header if header.count(h) > 1}
+    if dup:
+        raise MeasurementError(f"{source}: column(s) {sorted(dup)} appear more than once")
+    missing = [c for c in required if c not in header]
+    if missing and missing_hint is not None:
+        raise MeasurementError(f"{source}: column(s) {missing} {missing_hint} are not in the stream "
+                               f"(its header has {_cut(list(header), 300)})")
+    if missing:
+        hints = []
+        for m in missing:
+            close = difflib.get_close_matches(m, [h for h in header if h not in COLUMNS], n=1, cutoff=0.6)
+            hints.append(f"{m!r}" + (f" (found {close[0]!r}: misspelt?)" if close else ""))
+        raise MeasurementError(
+            f"{source}: missing required column(s) {', '.join(hints)}; "
+            f"the file has {_cut(list(header), 400)}; required: {list(REQUIRED)}, optional: {list(DERIVABLE)}"
+        )
+
+
+def check_finite(source, data: np.ndarray, names: Sequence[str], lines=None, *, max_abs: float = MAX_ABS,
+                 error: type[Exception] = MeasurementError) -> None:
+    """Every value of ``data`` (columns ``names``) finite and within ``max_abs`` (beyond it
+    the model's products of it overflow)."""
+    bad = ~np.isfinite(data)
+    if bad.any():
+        r, c = (int(i) for i in np.argwhere(bad)[0])
+        raise _refuse(error, f"{_where(source, lines, r)}, column {names[c]!r}: value {_num(data[r, c])} is not "
+                             "finite", r)
+    big = np.abs(data) > max_abs
+    if big.any():
+        r, c = (int(i) for i in np.argwhere(big)[0])
+        raise _refuse(error, f"{_where(source, lines, r)}, column {names[c]!r}: value {_num(data[r, c])} is beyond "
+                             f"{max_abs:g}: not a measurement (the model's products of it overflow)", r)
+
+
+def check_time(source, t: np.ndarray, lines=None, *, step: float | None = None, previous: float = math.nan,
+               column: str = "t", unit: str = "", error: type[Exception] = MeasurementError) -> float:
+    """Times that increase at a uniform ``step`` (within :data:`UNIFORM_RTOL`; ``None``: the
+    median step of ``t``) after ``previous`` (the last time of the chunk before, if any).
+    Returns the step; ``unit`` (" s") is written after the times."""
+    t = np.asarray(t, dtype=float)
+    shift = 0 if math.isnan(previous) else 1
+    tt = t if not shift else np.concatenate([[previous], t])
+    diff = np.diff(tt)
+    if not diff.size:
+        return 0.0 if step is None else step
+    if (diff <= 0).any():
+        j = int(np.argmax(diff <= 0))
+        r = j + 1 - shift
+        raise _refuse(error, f"{_where(source, lines, r)}, column {column!r}: time {_num(tt[j + 1])}{unit} does not "
+                             f"increase (previous {_num(tt[j])}{unit})", r)
+    step = float(np.median(diff)) if not step else step
+    off = np.abs(diff - step) > UNIFORM_RTOL * step
+    if off.any():
+        j = int(np.argmax(off))
+        r = j + 1 - shift
+        raise _refuse(error, f"{_where(source, lines, r)}, column {column!r}: non-uniform sampling: step "
+                             f"{_num(diff[j])}{unit} where the record's step is {_num(step)}{unit} (samples missing?)",
+                      r)
+    return step
+
+
+def first_step(t: np.ndarray, previous: float = math.nan) -> float:
+    """A stream's step: its first (from ``previous``, the last time before, if any; the batch
+    reader's derivatives take that one too), 0.0 while there is none."""
+    tt = np.asarray(t, dtype=float) if math.isnan(previous) else np.concatenate([[previous], t])
+    return float(tt[1] - tt[0]) if tt.size > 1 and tt[1] > tt[0] else 0.0
+
+
+def check_tilt(source, data: np.ndarray, names: Sequence[str], lines=None) -> None:
+    """Inclinations (columns ``names`` of ``data``) within :data:`MAX_TILT` rad: beyond, degrees."""
+    big = np.abs(data) > MAX_TILT
+    if big.any():
+        r, c = (int(i) for i in np.argwhere(big)[0])
+        raise _refuse(MeasurementError, f"{_where(source, lines, r)}, column {names[c]!r}: value {_num(data[r, c])} "
+                                        f"is beyond {MAX_TILT:g} rad ({math.degrees(MAX_TILT):.0f} deg), not a shaft's "
+                                        "tilt: degrees? (inclinations are in radians)", r)
 
 
 def read_table(path: str | os.PathLike, *, numeric: Sequence[str] | None = None
@@ -219,19 +320,7 @@ def load_measurements(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> M
     if path.is_dir():
         raise MeasurementError(f"{path}: is a directory, not a measurement file")
     header, data, lines = read_table(path, numeric=COLUMNS)
-    dup = {h for h in header if header.count(h) > 1}
-    if dup:
-        raise MeasurementError(f"{path}: column(s) {sorted(dup)} appear more than once")
-    missing = [c for c in REQUIRED if c not in header]
-    if missing:
-        hints = []
-        for m in missing:
-            close = difflib.get_close_matches(m, [h for h in header if h not in COLUMNS], n=1, cutoff=0.6)
-            hints.append(f"{m!r}" + (f" (found {close[0]!r}: misspelt?)" if close else ""))
-        raise MeasurementError(
-            f"{path}: missing required column(s) {', '.join(hints)}; "
-            f"the file has {_cut(header, 400)}; required: {list(REQUIRED)}, optional: {list(DERIVABLE)}"
-        )
+    check_header(path, header)
     unknown = [h for h in header if h not in COLUMNS]
     if unknown:
         close = {u: difflib.get_close_matches(u, COLUMNS, n=1, cutoff=0.75) for u in unknown}
@@ -250,32 +339,9 @@ def load_measurements(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> M
         raise MeasurementError(f"{path}: only {data.shape[0]} data rows; at least {min_rows} are needed")
     idx = {h: i for i, h in enumerate(header)}
     present = [c for c in COLUMNS if c in idx]
-    for c in present:
-        col = data[:, idx[c]]
-        bad = ~np.isfinite(col)
-        if bad.any():
-            r = int(np.argmax(bad))
-            raise MeasurementError(f"{path}, line {lines[r]}, column {c!r}: value {_num(col[r])} is not finite")
-        big = np.abs(col) > MAX_ABS
-        if big.any():
-            r = int(np.argmax(big))
-            raise MeasurementError(f"{path}, line {lines[r]}, column {c!r}: value {_num(col[r])} is beyond "
-                                   f"{MAX_ABS:g}: not a measurement (the model's products of it overflow)")
+    check_finite(path, data[:, [idx[c] for c in present]], present, lines)
     t = data[:, idx["t"]]
-    step = np.diff(t)
-    if (step <= 0).any():
-        r = int(np.argmax(step <= 0)) + 1
-        raise MeasurementError(
-            f"{path}, line {lines[r]}, column 't': time {_num(t[r])} does not increase (previous {_num(t[r - 1])})"
-        )
-    dt = float(np.median(step))
-    off = np.abs(step - dt) > UNIFORM_RTOL * dt
-    if off.any():
-        r = int(np.argmax(off)) + 1
-        raise MeasurementError(
-            f"{path}, line {lines[r]}, column 't': non-uniform sampling: step {_num(step[r - 1])} "
-            f"where the file's step is {_num(dt)}"
-        )
+    check_time(path, t, lines)
     out = np.empty((data.shape[0], len(COLUMNS)))
     for j, c in enumerate(COLUMNS):
         if c in idx:
@@ -295,8 +361,6 @@ def load_measurements(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> M
     return Measurements(out, source=f"{path}{note}", estimated=tuple(derived))
 
 
-#: a measurement cell beyond this is no measurement: squares and products of it overflow
-MAX_ABS = 1e30
 #: records longer than this get a note with what a diagnosis of them costs
 LARGE_RECORD = 1_000_000
 #: a diagnosis's cost per sample (measured: 40 001 samples in ~4.5 s, 5 M in ~560 s)
@@ -385,12 +449,5 @@ def _check_units(path: Path, out: np.ndarray, idx: dict, lines) -> list[str]:
                 unit = " (degrees: 57.3)" if abs(abs(ratio) - 180.0 / math.pi) < 5.0 else ""
                 raise MeasurementError(f"{path}, column 'phi': its rate is {ratio:.4g}x column 'phi_dot'{unit}: "
                                        "phi must be in radians and phi_dot in radians per time unit of 't'")
-    for c in ("theta_x", "theta_y"):
-        col = out[:, COLUMNS.index(c)]
-        big = np.abs(col) > MAX_TILT
-        if big.any():
-            r = int(np.argmax(big))
-            raise MeasurementError(f"{path}, line {lines[r]}, column {c!r}: value {_num(col[r])} is beyond "
-                                   f"{MAX_TILT:g} rad ({math.degrees(MAX_TILT):.0f} deg), not a shaft's tilt: "
-                                   "degrees? (inclinations are in radians)")
+    check_tilt(path, out[:, [COLUMNS.index("theta_x"), COLUMNS.index("theta_y")]], ("theta_x", "theta_y"), lines)
     return notes

@@ -173,7 +173,7 @@ MAX_SLOW_ROLL_SHARE = 0.5
 
 def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
     """Read a waveform file (CSV or Parquet) as the rig describes it."""
-    from .files import MeasurementError, read_table
+    from .files import MeasurementError, check_finite, check_time, read_table
 
     path = Path(path)
     try:
@@ -193,12 +193,7 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
                             f"the file (it has {list(col)})")
     if data.shape[0] < 100:
         raise WaveformError(f"{path}: only {data.shape[0]} rows: a run-up needs many revolutions of samples")
-    for c in needed:
-        x = data[:, col[c]]
-        bad = ~np.isfinite(x)
-        if bad.any():
-            r = int(np.argmax(bad))
-            raise WaveformError(f"{path}, line {lines[r]}, column {c!r}: value {float(x[r])!r} is not finite")
+    check_finite(path, data[:, [col[c] for c in needed]], needed, lines, max_abs=math.inf, error=WaveformError)
     for p in rig.probes:
         # a reading beyond any displacement probe's range: another unit, or no measurement
         metres = np.abs(rig.to_metres(data[:, col[p.name]]))
@@ -209,15 +204,8 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
                                 f"{rig.displacement} is beyond a displacement probe's range ({MAX_PROBE_M * 1e3:g} mm): "
                                 f"is units.displacement ({rig.displacement}) in {rig.source} right?")
     t = data[:, col[rig.time]] * TIME_UNITS[rig.time_unit]
+    dt = check_time(path, t, lines, column=rig.time, unit=" s", error=WaveformError)
     step = np.diff(t)
-    if (step <= 0).any():
-        r = int(np.argmax(step <= 0)) + 1
-        raise WaveformError(f"{path}, line {lines[r]}, column {rig.time!r}: time {float(t[r])!r} does not increase")
-    dt = float(np.median(step))
-    if np.any(np.abs(step - dt) > 1e-3 * dt):
-        r = int(np.argmax(np.abs(step - dt) > 1e-3 * dt)) + 1
-        raise WaveformError(f"{path}, line {lines[r]}, column {rig.time!r}: non-uniform sampling "
-                            f"(step {step[r - 1]:.6g} s where the file's is {dt:.6g} s)")
     if rig.keyphasor is not None:
         try:
             edges = pulse_edges(t, data[:, col[rig.keyphasor]], rig.keyphasor_threshold,

@@ -16,13 +16,13 @@ _LAZY: dict[str, str] = {
     "Monitor": ".core", "MonitorConfig": ".core",
     "CusumDesign": ".detector", "cusum_arl0": ".detector", "cusum_threshold": ".detector",
     "simulate_arl": ".detector",
-    "StreamReader": ".stream", "iter_chunks": ".stream",
+    "StreamReader": "..measurements.stream", "iter_chunks": "..measurements.stream",
 }
 
 if TYPE_CHECKING:
+    from ..measurements.stream import StreamReader, iter_chunks
     from .core import Monitor, MonitorConfig
     from .detector import CusumDesign, cusum_arl0, cusum_threshold, simulate_arl
-    from .stream import StreamReader, iter_chunks
 
 __all__ = ["CusumDesign", "Monitor", "MonitorConfig", "StreamReader", "cusum_arl0", "cusum_threshold",
            "iter_chunks", "simulate_arl"]

@@ -79,15 +79,15 @@ def _config(args, dt: float, *, ip: float = 0.3, time_scale: float = 1.0):
 
 def run_monitor(args: argparse.Namespace) -> int:
     from ..measurements.files import MeasurementError
+    from ..measurements.stream import read_ahead
     from ..outputs import check_writable
     from .core import ALARM_EVENTS, Monitor, interrupts_held
     from .fleet import open_stream
-    from .stream import read_ahead
 
     rig = None
     if args.rig:
         from ..measurements.rig import load_rig
-        from .rig_stream import natural_rpm_required
+        from ..measurements.rig_stream import natural_rpm_required
 
         if args.natural_rpm is None:
             raise ValueError(natural_rpm_required())

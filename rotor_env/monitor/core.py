@@ -33,7 +33,7 @@ from identifier.hac import chi2_log10_sf
 
 from ..effects import EFFECTS
 from ..measurements import COLUMNS
-from ..measurements.files import UNIFORM_RTOL, MeasurementError
+from ..measurements.files import MeasurementError, check_finite, check_time
 from ..online import IdentificationCore
 from ..outputs import atomic_write
 from ..regression import DEFAULT_EFFECTS, build_rows
@@ -268,28 +268,12 @@ class Monitor:
         if data.ndim != 2 or data.shape[1] != _N_COLS:
             raise MeasurementError(f"a chunk must have shape (samples, {_N_COLS}) with columns {COLUMNS}, "
                                    f"got {data.shape}; the monitor was not changed")
-        bad = ~np.isfinite(data)
-        if bad.any():
-            r, c = np.argwhere(bad)[0]
-            raise MeasurementError(f"row {r} of the chunk, column {COLUMNS[c]!r}: {data[r, c]!r} is not finite; "
-                                   "the monitor was not changed")
         stream = self._arrays["stream"]
-        t = data[:, 0]
-        if not math.isnan(stream[1]):
-            t = np.concatenate([[stream[1]], t])
-        step = np.diff(t)
-        if step.size:
-            first = 0 if math.isnan(stream[1]) else 1
-            if (step <= 0).any():
-                r = int(np.argmax(step <= 0))
-                raise MeasurementError(f"row {r + 1 - first} of the chunk, column 't': time {t[r + 1]!r} does not "
-                                       f"increase (previous {t[r]!r}); the monitor was not changed")
-            dt = stream[2] or float(step[0])
-            off = np.abs(step - dt) > UNIFORM_RTOL * dt
-            if off.any():
-                r = int(np.argmax(off))
-                raise MeasurementError(f"row {r + 1 - first} of the chunk, column 't': step {step[r]!r} where the "
-                                       f"stream's step is {dt!r} (samples missing?); the monitor was not changed")
+        try:  # the readers' checks (rotor_env.measurements.files), rows counted in the chunk
+            check_finite("the chunk", data, COLUMNS)
+            check_time("the chunk", data[:, 0], step=stream[2] or None, previous=stream[1])
+        except MeasurementError as exc:
+            raise MeasurementError(f"{exc}; the monitor was not changed") from None
         return data
 
     def _process(self, data: np.ndarray) -> list[dict]:

@@ -27,14 +27,14 @@ __all__ = ["monitor_streams", "open_stream", "watch_stream"]
 
 def open_stream(source, *, rig=None, natural_rpm: float | None = None, follow: bool = False,
                 idle_exit: float | None = None):
-    """``(reader, ip, time scale)``: a dimensionless :class:`~rotor_env.monitor.stream.StreamReader`,
-    or with ``rig`` a :class:`~rotor_env.monitor.rig_stream.RigStream` (its ``clock`` turns the
+    """``(reader, ip, time scale)``: a dimensionless :class:`~rotor_env.measurements.stream.StreamReader`,
+    or with ``rig`` a :class:`~rotor_env.measurements.rig_stream.RigStream` (its ``clock`` turns the
     monitor's times and speeds back to s and rpm; options in seconds scale by ``w_ref``)."""
     if rig is None:
-        from .stream import StreamReader
+        from ..measurements.stream import StreamReader
 
         return StreamReader(source, follow=follow, idle_exit=idle_exit), 0.3, 1.0
-    from .rig_stream import RigStream, natural_rpm_required
+    from ..measurements.rig_stream import RigStream, natural_rpm_required
 
     if natural_rpm is None:
         raise ValueError(natural_rpm_required())
@@ -52,8 +52,8 @@ def watch_stream(source: str, config, *, rig=None, natural_rpm: float | None = N
     ``config(dt, ip, time_scale) -> MonitorConfig`` when the options depend on the
     stream's step (a window in time units; what ``rotor-id monitor`` passes).
     """
+    from ..measurements.stream import read_ahead
     from .core import Monitor, MonitorConfig
-    from .stream import read_ahead
 
     name = name or str(source)
     monitor = None

@@ -28,7 +28,7 @@ class LiveView:
         self.clock = None
 
     def start(self, monitor, clock=None) -> None:
-        """Show ``monitor``; ``clock`` (a :class:`~.rig_stream.RigClock`): in s and rpm."""
+        """Show ``monitor``; ``clock`` (a :class:`~rotor_env.measurements.rig_stream.RigClock`): in s and rpm."""
         from rich.live import Live
 
         self.monitor = monitor

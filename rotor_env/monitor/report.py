@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-import html
 import json
 
-from ..outputs import atomic_write_text
+from ..pages import esc, write_page
 
 
 def write_report(monitor, path, *, source: str, overwrite: bool = False, clock=None) -> None:
     """Write the run's events and final state to ``path`` (every value escaped); ``clock``
-    (a rig stream's :class:`~.rig_stream.RigClock`): times in s and speeds in rpm."""
+    (a rig stream's :class:`~rotor_env.measurements.rig_stream.RigClock`): times in s and speeds in rpm."""
     s = monitor.summary()
-    esc = html.escape
 
     def when(t: float, speed: float | None = None) -> str:
         if clock is None:
@@ -33,16 +31,12 @@ def write_report(monitor, path, *, source: str, overwrite: bool = False, clock=N
         f"<tr><td>{esc(name)}</td><td>{esc(json.dumps(coef))}</td><td>{'yes' if s['significant'][name] else 'no'}"
         f"</td><td>{s['counted_blocks'][name]}</td></tr>" for name, coef in s["coefficients"].items())
     cfg = monitor.config
-    text = f"""<!doctype html><html><head><meta charset="utf-8"><title>rotor-id monitor</title>
-<style>body{{font-family:sans-serif;max-width:60em;margin:2em auto}}td,th{{border-bottom:1px solid #ccc;
-padding:.2em .6em}}table{{border-collapse:collapse}}</style></head><body>
-<h1>On-line monitoring of {esc(source)}</h1>
+    body = f"""<h1>On-line monitoring of {esc(source)}</h1>
 <p>{s['samples']} samples to {esc(end)}; equation-error noise floor
 {s['noise_floor']:.3g}. CUSUM per effect, threshold {s['threshold']:.3f} for a target in-control ARL of
 {cfg.arl0:g} samples (blocks of {cfg.block}); {s['alarms']} alarm(s).</p>
 <h2>Alarms</h2><table><tr><th>event</th><th>effect</th><th>onset</th><th>alarm</th><th>before</th>
 <th>after</th><th>log10 p</th></tr>{rows}</table>
 <h2>Model at the end</h2><table><tr><th>effect</th><th>parameters</th><th>significant</th>
-<th>blocks counted</th></tr>{model}</table></body></html>
-"""
-    atomic_write_text(path, text, overwrite=overwrite)
+<th>blocks counted</th></tr>{model}</table>"""
+    write_page(path, "rotor-id monitor", body, overwrite=overwrite)

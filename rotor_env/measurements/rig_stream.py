@@ -52,13 +52,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from ..measurements import COLUMNS
-from ..measurements.files import UNIFORM_RTOL, MeasurementError
-from ..measurements.keyphasor import KeyphasorError, KeyphasorTracker, check_once_per_turn
-from ..measurements.probes import probe_matrix
-from ..measurements.rig import SPEED_UNITS, TIME_UNITS, Rig
-from ..measurements.waveforms import LENGTH_UNIT, MAX_PROBE_M, TARGET_DT
+from .core import COLUMNS
+from .files import MeasurementError, check_finite, check_time, first_step
+from .keyphasor import KeyphasorError, KeyphasorTracker, check_once_per_turn
+from .probes import probe_matrix
+from .rig import SPEED_UNITS, TIME_UNITS, Rig
 from .stream import CHUNK_BYTES, SlidingDerivatives, StreamReader
+from .waveforms import LENGTH_UNIT, MAX_PROBE_M, TARGET_DT
 
 __all__ = ["DC_GAP_REVOLUTIONS", "RigClock", "RigStream", "natural_rpm_required"]
 
@@ -388,13 +388,11 @@ class RigStream:
         col = {h: i for i, h in enumerate(header)}
         self._cols = [col[c] for c in self.needed]
         sub = data[:, self._cols]
-        bad_rows = ~np.isfinite(sub)
         first_bad, error = data.shape[0], None
-        if bad_rows.any():
-            r, c = np.argwhere(bad_rows)[0]
-            first_bad = int(r)
-            error = self._fail(lines[r], f"{self.name}, line {lines[r]}, column {self.needed[c]!r}: value "
-                                         f"{float(sub[r, c])!r} is not finite")
+        try:
+            check_finite(self.name, sub, self.needed, lines, max_abs=math.inf)
+        except MeasurementError as exc:
+            first_bad, error = exc.row, self._fail(lines[exc.row], str(exc))
         probes = np.abs(self.rig.to_metres(sub[:first_bad, 2:]))
         big = probes > MAX_PROBE_M
         if big.any():
@@ -404,24 +402,12 @@ class RigStream:
                                          f"{float(sub[r, 2 + c])!r} {self.rig.displacement} is beyond a displacement "
                                          f"probe's range ({MAX_PROBE_M * 1e3:g} mm)")
         t = data[:first_bad, self._cols[0]] * TIME_UNITS[self.rig.time_unit]
-        tt = t if math.isnan(self._last_t) else np.concatenate([[self._last_t], t])
-        shift = 0 if math.isnan(self._last_t) else 1
-        step = np.diff(tt)
-        if step.size:
-            if self._dt == 0.0:
-                self._dt = float(step[0])
-            wrong = step <= 0
-            off = np.abs(step - self._dt) > UNIFORM_RTOL * self._dt
-            if wrong.any() or off.any():
-                j = int(np.argmax(wrong | off))
-                r = j + 1 - shift
-                col_name = self.rig.time
-                if wrong[j]:
-                    msg = f"time {float(tt[j + 1])!r} s does not increase (previous {float(tt[j])!r} s)"
-                else:
-                    msg = (f"non-uniform sampling: step {float(step[j]):.6g} s where the stream's is "
-                           f"{self._dt:.6g} s (samples missing?)")
-                return r, self._fail(lines[r], f"{self.name}, line {lines[r]}, column {col_name!r}: {msg}")
+        self._dt = self._dt or first_step(t, self._last_t)  # the rows before a bad one go out with it
+        try:
+            check_time(self.name, t, lines, step=self._dt or None, previous=self._last_t, column=self.rig.time,
+                       unit=" s")
+        except MeasurementError as exc:
+            return exc.row, self._fail(lines[exc.row], str(exc))
         return first_bad, error
 
     def _push(self, data: np.ndarray, lines: np.ndarray) -> np.ndarray:

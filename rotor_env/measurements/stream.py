@@ -32,8 +32,17 @@ from typing import BinaryIO
 import numpy as np
 from scipy.signal import savgol_filter
 
-from ..measurements import COLUMNS
-from ..measurements.files import DERIVABLE, MAX_TILT, REQUIRED, UNIFORM_RTOL, MeasurementError
+from .core import COLUMNS
+from .files import (
+    DERIVABLE,
+    REQUIRED,
+    MeasurementError,
+    check_finite,
+    check_header,
+    check_tilt,
+    check_time,
+    first_step,
+)
 
 __all__ = ["StreamReader", "iter_chunks", "read_ahead"]
 
@@ -219,16 +228,7 @@ class StreamReader:
             raise MeasurementError(f"{self.name}, line 1: the header is longer than {MAX_LINE_BYTES // 1000} kB")
         text = raw.decode("utf-8-sig", errors="replace").strip()
         header = [h.strip() for h in next(csv.reader([text]))] if text else []
-        dup = {h for h in header if header.count(h) > 1}
-        if dup:
-            raise MeasurementError(f"{self.name}: column(s) {sorted(dup)} appear more than once")
-        missing = [c for c in self.required if c not in header]
-        if missing and self.missing_hint is not None:
-            raise MeasurementError(f"{self.name}: column(s) {missing} {self.missing_hint} are not in the stream "
-                                   f"(its header has {str(header)[:300]})")
-        if missing:
-            raise MeasurementError(f"{self.name}: missing required column(s) {missing}; the header has {str(header)[:300]}; "
-                                   f"required: {list(REQUIRED)}, optional: {list(DERIVABLE)}")
+        check_header(self.name, header, required=self.required, missing_hint=self.missing_hint)
         self._header_names = header
         return header
 
@@ -342,46 +342,18 @@ class StreamReader:
             yield out
 
     def _validate(self, data: np.ndarray, lines: np.ndarray) -> np.ndarray | None:
-        """The rows as the ten model columns; a bad row raises with its index as ``row``."""
-        def fail(message: str, row: int):
-            exc = MeasurementError(message)
-            exc.row = row
-            return exc
-
+        """The rows as the ten model columns; a bad row raises with its index as ``row``
+        (the checks are the batch reader's: :func:`~rotor_env.measurements.files.check_finite` ...)."""
         header = self._header_names
         if data.shape[0] == 0:
             return None
         idx = {h: i for i, h in enumerate(header)}
-        for c in COLUMNS:
-            if c in idx:
-                col = data[:, idx[c]]
-                bad = ~np.isfinite(col)
-                if bad.any():
-                    r = int(np.argmax(bad))
-                    raise fail(f"{self.name}, line {lines[r]}, column {c!r}: value {float(col[r])!r} is not finite", r)
+        present = [c for c in COLUMNS if c in idx]
+        check_finite(self.name, data[:, [idx[c] for c in present]], present, lines)
         t = data[:, idx["t"]]
-        tt = t if math.isnan(self._last_t) else np.concatenate([[self._last_t], t])
-        step = np.diff(tt)
-        shift = 0 if math.isnan(self._last_t) else 1
-        if step.size:
-            if (step <= 0).any():
-                r = int(np.argmax(step <= 0))
-                raise fail(f"{self.name}, line {lines[r + 1 - shift]}, column 't': time {float(tt[r + 1])!r} "
-                           f"does not increase (previous {float(tt[r])!r})", r + 1 - shift)
-            if self._dt == 0.0:
-                self._dt = float(step[0])
-            off = np.abs(step - self._dt) > UNIFORM_RTOL * self._dt
-            if off.any():
-                r = int(np.argmax(off))
-                raise fail(f"{self.name}, line {lines[r + 1 - shift]}, column 't': non-uniform "
-                           f"sampling: step {float(step[r])!r} where the stream's step is {self._dt!r}", r + 1 - shift)
-        for c in ("theta_x", "theta_y"):
-            col = data[:, idx[c]]
-            big = np.abs(col) > MAX_TILT
-            if big.any():
-                r = int(np.argmax(big))
-                raise fail(f"{self.name}, line {lines[r]}, column {c!r}: value {float(col[r])!r} is beyond "
-                           f"{MAX_TILT:g} rad, not a shaft's tilt: degrees? (inclinations are in radians)", r)
+        self._dt = self._dt or first_step(t, self._last_t)
+        check_time(self.name, t, lines, step=self._dt or None, previous=self._last_t)
+        check_tilt(self.name, data[:, [idx["theta_x"], idx["theta_y"]]], ("theta_x", "theta_y"), lines)
         out = np.zeros((data.shape[0], len(COLUMNS)))
         for j, c in enumerate(COLUMNS):
             if c in idx:

@@ -1,0 +1,23 @@
+"""Figures: every plot draws what was computed before, as statsmodels' graphics and
+scikit-learn's displays do; the result objects' ``plot_*`` methods hand them their numbers.
+
+:mod:`.field`: the views a rotordynamics engineer reads (Bode, polar, orbits, waterfall,
+Campbell, parameter tracks).
+"""
+
+from .field import (
+    bode_phases,
+    by_speed,
+    frequency_from_rad,
+    phase_deg,
+    plot_bode,
+    plot_campbell,
+    plot_orbit,
+    plot_parameter_tracks,
+    plot_polar,
+    plot_waterfall,
+    speed_from_rad,
+)
+
+__all__ = ["bode_phases", "by_speed", "frequency_from_rad", "phase_deg", "plot_bode", "plot_campbell",
+           "plot_orbit", "plot_parameter_tracks", "plot_polar", "plot_waterfall", "speed_from_rad"]
