@@ -191,6 +191,15 @@ def run(n: int, seed: int = 0, *, per_case_s: float = 20.0, full_share: float = 
     with tempfile.TemporaryDirectory(prefix="rotor-id-fuzz-") as tmp:
         for kind in kinds:
             suffix, target = TARGETS[kind]
+            # the unmutated seed once, untimed: it must be read, and it compiles the numba kernels
+            # (a fresh clone has no cache; compiling is not a hang the input caused)
+            warm = Path(tmp) / f"{kind}-seed{suffix}"
+            warm.write_text(seeds[kind])
+            try:
+                target(warm, False)
+            except Exception:  # noqa: BLE001 - judged below, with every mutation, not here
+                pass
+            warm.unlink()
             for k in range(n):
                 text = seeds[kind]
                 for _ in range(rng.choice([1, 1, 2, 3])):
