@@ -197,7 +197,7 @@ def run(n: int, seed: int = 0, *, per_case_s: float = 20.0, full_share: float = 
             warm.write_text(seeds[kind])
             try:
                 target(warm, False)
-            except Exception:  # noqa: BLE001 - judged below, with every mutation, not here
+            except Exception:  # judged below, with every mutation, not here
                 pass
             warm.unlink()
             for k in range(n):

@@ -144,9 +144,8 @@ def test_a_duplicated_probe_column_is_refused(run):
 def test_the_monitor_refuses_a_keyphasor_at_half_the_shaft_rate(run):
     """The rig stream (``rotor-id monitor --rig``) runs the half-rate check on the revolutions
     its DC gap is learned from; the same run with all its pulses streams through."""
-    from rotor_env.measurements.rig_stream import RigStream
-
     from rotor_env.measurements.files import MeasurementError
+    from rotor_env.measurements.rig_stream import RigStream
 
     folder, cols = run
     rig = _rig(folder, ONE_PLANE)
