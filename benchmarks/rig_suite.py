@@ -315,7 +315,8 @@ def run_record(spec: RecordSpec) -> dict:
     out.update(named=named, verdict=d.get("verdict"), vectors_missing=vec_missing,
                vectors_verdict=(d.get("vectors") or {}).get("verdict"), noise_floor=d.get("noise_floor"),
                rms_before=d.get("rms_before"), rms_after=d.get("rms_after"), unit=d.get("unit"),
-               parameters=params, rejected=d.get("rejected"), notes=d.get("notes"))
+               parameters=params, rejected=d.get("rejected"), notes=d.get("notes"),
+               undecidable=d.get("undecidable") or {})
     out["floor_ratio"] = (d["noise_floor"] / out["true_floor"]) if d.get("noise_floor") else None
     f = spec.fault
     out["crack_named_falsely"] = f not in CRACKS and any(c in named for c in CRACKS)
@@ -326,6 +327,8 @@ def run_record(spec: RecordSpec) -> dict:
     else:
         out["right"] = f in named
     out["false_alarm"] = f in ("healthy", "runout") and bool(named)
+    # a fault not named that the diagnosis says it cannot decide: the limit stated, not a miss
+    out["said_undecidable"] = not out["right"] and f in out["undecidable"]
     out["crack"] = crack_errors(f, truth["fault"], params)
     out["candidates"] = d.get("candidates")
     return jsonable(out)
@@ -341,10 +344,10 @@ def _fmt_range(xs: list[float], fmt: str = "{:.2f}") -> str:
 def detection_table(outcomes: list[dict]) -> str:
     """Markdown: per probe noise, the detection rate, false alarms, false cracks, the
     floor's ratio to the true noise, the crack's errors."""
-    lines = ["| probe noise (um) | faults named right | false alarms (healthy, runout) | crack named for a "
-             "non-crack fault | floor / true noise: median (range) | crack size error: median (max) | "
-             "crack axis error (deg): median (max) | errors |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| probe noise (um) | faults named right | not named, said undecidable | false alarms (healthy, "
+             "runout) | crack named for a non-crack fault | floor / true noise: median (range) | crack size error: "
+             "median (max) | crack axis error (deg): median (max) | errors |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for noise in sorted({o["spec"]["noise_um"] for o in outcomes}):
         rows = [o for o in outcomes if o["spec"]["noise_um"] == noise]
         ok = [o for o in rows if "error" not in o]
@@ -357,6 +360,7 @@ def detection_table(outcomes: list[dict]) -> str:
         axes = [c["axis_error_deg"] for c in cracks if c]
         lines.append(
             f"| {noise:g} | {sum(o['right'] for o in faults)}/{len(faults)} "
+            f"| {sum(bool(o.get('said_undecidable')) for o in faults)}/{len(faults)} "
             f"| {sum(o['false_alarm'] for o in clean)}/{len(clean)} "
             f"| {sum(o['crack_named_falsely'] for o in noncrack)}/{len(noncrack)} "
             f"| {_fmt_range(ratios)} "
@@ -374,7 +378,9 @@ def per_fault_table(outcomes: list[dict]) -> str:
         cells = []
         for n in noises:
             rows = [o for o in outcomes if o["spec"]["fault"] == kind and o["spec"]["noise_um"] == n]
-            cells.append(f"{sum(bool(o.get('right')) for o in rows)}/{len(rows)}" if rows else "-")
+            und = sum(bool(o.get("said_undecidable")) for o in rows)
+            cells.append((f"{sum(bool(o.get('right')) for o in rows)}/{len(rows)}"
+                          + (f" ({und} undecidable)" if und else "")) if rows else "-")
         if any(c != "-" for c in cells):
             lines.append(f"| {kind} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -398,6 +404,8 @@ def failures(outcomes: list[dict]) -> list[str]:
                  f"{cr['axis_error_deg']:.1f} deg" if cr else "")
         rej = {k: v for k, v in (o.get("rejected") or {}).items() if k == o["spec"]["fault"]}
         extra += f"; {o['spec']['fault']} turned down: {rej[o['spec']['fault']]}" if rej else ""
+        und = (o.get("undecidable") or {}).get(o["spec"]["fault"])
+        extra += f"; said: {und}" if und else ""
         out.append(f"{head} {fault}: named {o['named'] or 'nothing'} (verdict {o['verdict']}; vectors "
                    f"{o['vectors_missing']}), floor {o['floor_ratio'] or math.nan:.2f}x{extra}")
     return out

@@ -88,7 +88,8 @@ class RigDiagnosis(Result):
         })
         if isinstance(self.diagnosis, OutputErrorDiagnosis):
             byvec = self.named_by_vectors
-            d.update({"verdict": self.verdict, "missing": self.missing, "named_by_vectors": byvec})
+            d.update({"verdict": self.verdict, "missing": self.missing, "named_by_vectors": byvec,
+                      "undecidable": self.undecidable})
             d["notes"] += [f"{e}: named by the 1X vectors; the waveforms' fit is at its floor without it (its "
                            "response there is absorbed by the runout term, the unbalance and the segments' start "
                            "states): they neither confirm nor refute it" for e in byvec]
@@ -100,6 +101,8 @@ class RigDiagnosis(Result):
                  f"VERDICT: {self.verdict}" + (f" -- missing: {', '.join(self.missing)}" if self.missing else "")
                  + " (one conclusion for the record: the waveforms' model holds every sample; the 1X "
                  "vectors below are a part of it)"]
+        if self.undecidable:
+            lines.append("what this record cannot decide: " + "; ".join(self.undecidable.values()))
         for c in self.vectors.to_dict()["criticals"]:
             lines.append(f"critical speed {c['rpm']:.1f} rpm, damping ratio {c['damping_ratio']:.4f}")
         lines.append(f"time unit of the model: 1/{self.w_ref:.6g} s (natural frequency "
@@ -153,6 +156,15 @@ class RigDiagnosis(Result):
             return []
         lib = library_effects()
         return [e for e in self.vectors.missing if e in lib and e not in d.missing]
+
+    @property
+    def undecidable(self) -> dict[str, str]:
+        """Effects the waveforms cannot decide at any size and the 1X vectors do not name."""
+        d = self.diagnosis
+        if not isinstance(d, OutputErrorDiagnosis):
+            return {}
+        byvec = self.named_by_vectors
+        return {e: t for e, t in d.undecidable.items() if e not in byvec}
 
     @property
     def missing(self) -> list[str]:

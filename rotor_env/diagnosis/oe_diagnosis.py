@@ -33,6 +33,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..effects import EFFECTS
+from .detectability import Detectability, assess_all
 from .output_error import (
     OutputErrorFit,
     ShootingGrid,
@@ -99,6 +100,9 @@ class OutputErrorDiagnosis:
     unit: str = ""
     seconds: float = 0.0
     notes: list[str] = field(default_factory=list)
+    #: each library effect the final model lacks: how large it would have to be to show
+    #: (:mod:`.detectability`); those it cannot decide at all are in :attr:`undecidable`
+    detectability: dict[str, Detectability] = field(default_factory=dict)
 
     @property
     def probe_factor(self) -> float:
@@ -133,6 +137,11 @@ class OutputErrorDiagnosis:
             if not c.accepted and c.effect not in self.added and c.effect not in self.model_after:
                 out[c.effect] = f"round {c.round}: {c.reason}"
         return out
+
+    @property
+    def undecidable(self) -> dict[str, str]:
+        """Effects these data cannot decide at any size, each with the reason."""
+        return {e: d.sentence() for e, d in self.detectability.items() if not d.decidable}
 
     def parameters(self) -> dict[str, dict]:
         """Every effect of the final model: physical values and 95 % half-widths."""
@@ -200,6 +209,8 @@ class OutputErrorDiagnosis:
                  "parameters": c.parameters, "ci95": c.intervals}
                 for c in self.candidates],
             "rejected": self.rejected,
+            "undecidable": self.undecidable,
+            "detectability": {e: d.to_dict() for e, d in self.detectability.items()},
             "seconds": self.seconds,
             "notes": list(self.notes),
         }
@@ -218,6 +229,13 @@ class OutputErrorDiagnosis:
         if self.rejected:
             lines.append("turned down:")
             lines += [f"  {e}: {r}" for e, r in self.rejected.items()]
+        if self.undecidable:
+            lines.append("what these data cannot decide:")
+            lines += [f"  {t}" for t in self.undecidable.values()]
+        decidable = [d for d in self.detectability.values() if d.decidable]
+        if decidable:
+            lines.append("the smallest size each effect not named would show at (dimensionless):")
+            lines += [f"  {d.sentence()}" for d in decidable]
         return "\n".join(lines)
 
 
@@ -543,21 +561,17 @@ def diagnose_output_error(
         cur_model = (*cur_model, *[e for e in fits[chosen.effect].effects if e not in cur_model and e != "stiffness"])
         current = fits[chosen.effect]
         say(f"round {rnd}: {chosen.effect} added: residual {current.rms / floor:.3g}x the noise floor")
-    if "static_load" in cands and "static_load" not in cur_model and "nonlinear_stiffness" not in cur_model:
-        notes.append("a static load only shifts a linear rotor's static position, which the probes' gap removal "
-                     "takes away: these waveforms cannot show one (a crack's or a non-linearity's response to it can)")
-    # what the data cannot decide: through one critical the whirl runs at about the natural
-    # frequency, where a cross-coupled stiffness q acts exactly as a damping -q/w: the
-    # fitted damping is c - q, whichever of the two the rotor has
-    if "viscous_damping" in cur_model and "cross_coupled_stiffness" in cands \
-            and "cross_coupled_stiffness" not in cur_model:
-        c = current.parameters("viscous_damping").get("c", math.nan)
-        notes.append(f"the damping c = {c:.4g} may be a smaller damping plus a destabilising cross-coupled "
-                     "stiffness (c - q at the natural frequency): a run through one critical cannot separate "
-                     "them; a record whose whirl frequency moves (a second critical, a free whirl at another "
-                     "speed) can")
+    # what the data cannot decide: each candidate the final model lacks, asked how much of
+    # its signature the model and the nuisance terms take and how large it would have to be
+    # to show (a static load in the probes' offsets, a cross-coupling in the damping)
+    step("waveforms: what the record cannot decide (detectability of the effects not named)")
+    left = [c for c in cands if c not in cur_model
+            and not any(p.scanned for p in EFFECTS[c].argument_parameters)]
+    detect = assess_all(current, left, alpha=alpha / max(len(cands), 1))
+    say(f"detectability of {len(detect)} effects not named: "
+        f"{sum(not d.decidable for d in detect.values())} cannot be decided")
     return OutputErrorDiagnosis(tuple(model), cur_model, base, current, floor, tried, added, unit_scale, unit,
-                                time.perf_counter() - t_start, notes)
+                                time.perf_counter() - t_start, notes, detect)
 
 
 # ------------------------------------------------------------------ figures and report

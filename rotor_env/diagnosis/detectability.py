@@ -1,0 +1,201 @@
+"""What a record cannot decide: the smallest size of each effect it would show.
+
+A diagnosis that names nothing has said little until it says how large a fault could be
+and still hide in the data.  For every library effect the final model lacks, the
+output-error fit is asked (:func:`~rotor_env.diagnosis.output_error.added_effect_information`)
+how much of the effect's output signature the model, the probes' offsets and runout and
+the segments' free start states already take, and what the rest is worth against the
+noise:
+
+- ``visible``: the share of the signature's energy left (least and most visible
+  direction of its coefficients).  A static load on a linear rotor only moves the static
+  position, which the probes' offsets take (visible share ~0): no displacement record can
+  show it.  Through one critical a cross-coupled stiffness ``q`` acts as the damping
+  ``-q/w`` at the whirl frequency ``w ~ 1``: the damping takes nearly all of it.
+- the **minimum detectable size**: the size at which the HAC Wald test of the effect's
+  coefficients (the test the diagnosis uses, at the diagnosis's Bonferroni level) would
+  reject zero with probability ``power``.  With ``C`` the covariance of the coefficients'
+  estimate at zero size and ``lambda`` the non-centrality at which a chi-square test with
+  ``q`` degrees of freedom has that power, the smallest detectable coefficient vector
+  along a unit direction ``u`` has length ``sqrt(lambda u'C u)``; we report it along the
+  most visible direction (``smallest``) and the least visible one (``smallest_any``: in
+  any direction, e.g. with the fault's axis anywhere), in the effect's physical
+  parameters.
+- a **score test** (Rao's Lagrange multiplier) of each effect at the final model: does the
+  residual lean towards it, and towards what size (the Gauss-Newton step from zero)?  For
+  an undecidable effect this is reported as a hint, never as a finding: it rides on the
+  small visible part of the signature, which any slight model-form difference (a damping
+  that is not purely viscous) can also produce.
+- ``decidable``: ``False`` when less than :data:`UNDECIDABLE_SHARE` of the signature is
+  left in its most visible direction: at any size the effect reads as its lookalike
+  (``absorbed_by`` names it), and the report says so instead of calling the record healthy.
+
+Effects with an argument that is not an orientation (the rub's clearance) are assessed at
+their declared default; orientations at two settings a quarter period apart, the worse
+one kept (a fault with its axis anywhere).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..effects import EFFECTS
+from .output_error import OutputErrorFit, added_effect_information
+
+__all__ = ["UNDECIDABLE_SHARE", "Detectability", "assess", "assess_all", "required_noncentrality"]
+
+#: less than this share of an effect's output signature left visible by the model and the
+#: nuisance terms, in its most visible direction: the record cannot decide it at any size
+UNDECIDABLE_SHARE = 1e-3
+#: power of the test at the minimum detectable size
+POWER = 0.8
+
+
+def required_noncentrality(q: int, alpha: float, power: float = POWER) -> float:
+    """The non-centrality ``lambda`` at which a chi-square test with ``q`` degrees of freedom at
+    level ``alpha`` rejects with probability ``power``."""
+    from scipy.optimize import brentq
+    from scipy.stats import chi2, ncx2
+
+    crit = chi2.isf(alpha, q)
+    return float(brentq(lambda lam: ncx2.sf(crit, q, lam) - power, 1e-9, 1e4))
+
+
+@dataclass(frozen=True)
+class Detectability:
+    """One effect's detectability in one record (see the module docstring)."""
+
+    effect: str
+    visible: tuple[float, float]  #: least, most visible share of its signature
+    absorbed_by: dict[str, float]
+    smallest: dict[str, float]  #: physical parameters at the minimum detectable size, best direction
+    smallest_any: dict[str, float]  #: ... least visible direction (inf where nothing is visible)
+    coefficients: tuple[str, ...]
+    covariance: np.ndarray  #: HAC covariance of the coefficients' estimate at zero size
+    noncentrality: float  #: the Wald statistic's non-centrality needed (level and power)
+    alpha: float
+    arguments: dict[str, float]
+    #: Rao's score test at the final model: statistic, log10 p, and the physical values of
+    #: the one-step estimate (what the residual leans towards)
+    score: float = 0.0
+    score_log10_p: float = 0.0
+    leaning: dict[str, float] | None = None
+
+    @property
+    def leans(self) -> bool:
+        """The residual leans significantly (at :attr:`alpha`) towards the effect."""
+        return self.score_log10_p < math.log10(self.alpha)
+
+    @property
+    def decidable(self) -> bool:
+        return self.visible[1] >= UNDECIDABLE_SHARE
+
+    @property
+    def lookalike(self) -> str:
+        """The group of the fit that takes most of its signature."""
+        return next(iter(self.absorbed_by), "")
+
+    def noncentrality_of(self, values: dict[str, float]) -> float:
+        """The Wald statistic's non-centrality an effect of these physical ``values`` would give
+        in this record (``inf`` where its coefficients leave the estimable space)."""
+        eff = EFFECTS[self.effect]
+        theta = np.asarray(eff.to_coefficients({p.name: p.default for p in eff.parameters} | dict(values)), float)
+        w, V = np.linalg.eigh(self.covariance)
+        z = V.T @ theta
+        ok = w > 1e-300
+        return float(np.sum(z[ok] ** 2 / w[ok])) if not np.any(np.abs(z[~ok]) > 0) else math.inf
+
+    def sentence(self) -> str:
+        look = self.lookalike
+        share = self.absorbed_by.get(look, 0.0)
+        small = ", ".join(f"{k} = {_fmt(v)}" for k, v in _sizes(self.effect, self.smallest).items())
+        if not self.decidable:
+            hidden = 100 * (1 - self.visible[1])
+            text = (f"{self.effect}: these data cannot decide it: {hidden:.{2 if hidden < 99.99 else 4}f} % of its "
+                    f"signature is taken by the fit's other terms, most by {look}")
+            finite = all(math.isfinite(v) for v in _sizes(self.effect, self.smallest).values())
+            text += f"; only from {small} would it show" if finite else "; it would not show at any size"
+            if self.leans and self.leaning:
+                lean = ", ".join(f"{k} = {_fmt(v)}" for k, v in _sizes(self.effect, self.leaning).items())
+                text += (f"; the residual leans towards {lean} (score test log10 p = {self.score_log10_p:.3g}), "
+                         f"which only its small visible part, not {look}, carries: a hint, not a finding")
+            return text
+        text = f"{self.effect}: would show from {small} (Wald test, {100 * POWER:.0f} % power)"
+        if share > 0.5:
+            text += f"; below that it reads as {look} ({100 * share:.0f} % of its signature)"
+        return text
+
+    def to_dict(self) -> dict:
+        return {"decidable": self.decidable, "visible_share": list(self.visible),
+                "absorbed_by": self.absorbed_by, "smallest": self.smallest, "smallest_any": self.smallest_any,
+                "coefficients": list(self.coefficients), "covariance": self.covariance.tolist(),
+                "noncentrality": self.noncentrality, "alpha": self.alpha, "arguments": self.arguments,
+                "score": self.score, "score_log10_p": self.score_log10_p, "leaning": self.leaning,
+                "sentence": self.sentence()}
+
+
+def _fmt(v: float) -> str:
+    return "inf" if not math.isfinite(v) else f"{v:.3g}"
+
+
+def _sizes(effect: str, values: dict[str, float]) -> dict[str, float]:
+    """The magnitudes among an effect's physical parameters (its phases and axes say where,
+    not how large)."""
+    eff = EFFECTS[effect]
+    angles = {p.name for p in eff.parameters if p.orientation or p.name.endswith("phase")}
+    return {k: abs(v) for k, v in values.items() if k not in angles} or dict(values)
+
+
+def _direction_size(eff, cov: np.ndarray, lam: float, which: int, visible: float) -> dict[str, float]:
+    if visible < 1e-9:
+        return {p.name: math.inf for p in eff.parameters if not p.orientation}
+    w, V = np.linalg.eigh(cov)
+    a = math.sqrt(lam * max(w[which], 0.0))
+    return {k: float(v) for k, v in eff.from_coefficients(a * V[:, which]).items()}
+
+
+def assess(fit: OutputErrorFit, effect: str, *, alpha: float = 0.05, power: float = POWER) -> Detectability:
+    """The detectability of ``effect`` (not in ``fit``'s model) in ``fit``'s record."""
+    eff = EFFECTS[effect]
+    settings = [{}]
+    orient = [p for p in eff.argument_parameters if p.orientation]
+    if orient:
+        settings = [{p.name: k * p.angle_period / 4 for p in orient} for k in (0, 1)]
+    best = None
+    for args in settings:
+        info = added_effect_information(fit, effect, args)
+        if best is None or info.visible_share[1] < best.visible_share[1]:
+            best = info
+    from identifier.hac import chi2_log10_sf
+
+    q = len(best.coefficients)
+    lam = required_noncentrality(q, alpha, power)
+    lo, hi = best.visible_share
+    w = np.linalg.eigvalsh(best.covariance)
+    leaning = ({k: float(v) for k, v in eff.from_coefficients(best.one_step).items()}
+               if best.one_step is not None and hi >= 1e-9 else None)
+    return Detectability(
+        effect, (lo, hi), best.absorbed_by,
+        _direction_size(eff, best.covariance, lam, 0, hi),
+        _direction_size(eff, best.covariance, lam, len(w) - 1, lo),
+        best.coefficients, best.covariance, lam, alpha, best.arguments,
+        best.score, chi2_log10_sf(best.score, q), leaning)
+
+
+def assess_all(fit: OutputErrorFit, effects: Sequence[str], *, alpha: float = 0.05) -> dict[str, Detectability]:
+    """:func:`assess` for each of ``effects`` outside the model (those with a non-orientation
+    argument, whose visibility hangs on it, at its default); one that cannot be simulated
+    along the fit (diverges) is left out."""
+    out = {}
+    for e in effects:
+        if e in fit.effects:
+            continue
+        try:
+            out[e] = assess(fit, e, alpha=alpha)
+        except FloatingPointError:
+            continue
+    return out

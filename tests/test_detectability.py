@@ -1,0 +1,112 @@
+"""What a record cannot decide (rotor_env.diagnosis.detectability): a static load on a
+linear rotor is invisible in displacements, a cross-coupling through one critical reads as
+damping, and the minimum detectable size the module predicts is the size the diagnosis's
+own Wald test detects, checked by simulation with known truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from rotor_env.diagnosis.detectability import assess, assess_all, required_noncentrality
+from rotor_env.diagnosis.output_error import ShootingGrid, equation_error_start, fit_output_error
+from rotor_env.params import RotorParams
+from rotor_env.simulator import RunUp, Simulator
+
+HEALTHY = {"tau": 0.005, "beta": 0.3, "c": 0.05}
+MODEL = ("unbalance", "viscous_damping")
+NOISE = 5e-4  # 0.5 um on a 1 mm length unit
+
+
+def _record(extra_effects=(), extra=None, seed=0, t_end=300.0):
+    p = RotorParams(ip=0.0, effects=("stiffness", "unbalance", "viscous_damping", *extra_effects),
+                    values={**HEALTHY, **(extra or {})})
+    return Simulator(p).run(t_end=t_end, dt=0.04, run_up=RunUp(rate=0.005, speed0=0.4))
+
+
+def _grid(m, seed):
+    rng = np.random.default_rng(seed)
+    return ShootingGrid.from_arrays(m.t, m.phi, m.phi_dot, m.theta_x + rng.normal(0, NOISE, len(m.t)),
+                                    m.theta_y + rng.normal(0, NOISE, len(m.t)), 0.0, noise_std=NOISE)
+
+
+def _fit(grid, model=MODEL):
+    return fit_output_error(grid, model, equation_error_start(grid, model))
+
+
+def test_required_noncentrality_matches_scipy():
+    for q, alpha in ((1, 0.05), (2, 0.005), (4, 0.01)):
+        lam = required_noncentrality(q, alpha, 0.8)
+        assert stats.ncx2.sf(stats.chi2.isf(alpha, q), q, lam) == pytest.approx(0.8, abs=1e-6)
+
+
+def test_a_static_load_is_invisible_and_a_cross_coupling_reads_as_damping():
+    m = _record(("static_load", "cross_coupled_stiffness"), {"load_y": 0.003, "load_x": 0.001,
+                                                            "cross_coupling": 0.02})
+    fit = _fit(_grid(m, 1))
+    d = assess_all(fit, ["static_load", "cross_coupled_stiffness", "asymmetry"], alpha=0.05 / 3)
+    load, cc, asym = d["static_load"], d["cross_coupled_stiffness"], d["asymmetry"]
+    # a constant deflection: the probes' offsets take all of it, at any size
+    assert not load.decidable and load.visible[1] < 1e-9
+    assert load.lookalike == "the probes' offsets and runout"
+    assert load.noncentrality_of({"load_y": 0.003, "load_x": 0.001}) < 1e-6
+    assert "at any size" in load.sentence()
+    # the whirl at the natural frequency: q acts as the damping -q/w, the damping takes it
+    assert not cc.decidable and cc.lookalike == "viscous_damping"
+    # ... and shows only above its minimum detectable size: the truth's non-centrality and
+    # the size agree on which side of it the truth lies
+    q_min = abs(cc.smallest["cross_coupling"])
+    assert cc.noncentrality_of({"cross_coupling": q_min}) == pytest.approx(cc.noncentrality, rel=1e-6)
+    assert (cc.noncentrality_of({"cross_coupling": 0.02}) >= cc.noncentrality) == (0.02 >= q_min)
+    assert "only from cross_coupling" in cc.sentence()
+    # the fitted damping is c - q
+    assert fit.parameters("viscous_damping")["c"] == pytest.approx(0.05 - 0.02, abs=2e-3)
+    # an asymmetry is visible: a minimum detectable size, small against a crack's 0.02
+    assert asym.decidable and 0 < asym.smallest["D"] < 0.005
+
+
+def test_the_minimum_detectable_size_is_what_the_wald_test_detects():
+    """Simulation with known truth: an asymmetry at the predicted minimum detectable size
+    (80 % power at the level used) is detected by the fitted model's HAC Wald test about
+    80 % of the time, and the Wald statistic's mean is q + lambda."""
+    alpha = 0.01
+    fit0 = _fit(_grid(_record(), 0))
+    det = assess(fit0, "asymmetry", alpha=alpha)
+    D = abs(det.smallest["D"])
+    axis = det.arguments["D_axis"]
+    m = _record(("asymmetry",), {"D": D, "D_axis": axis})
+    crit = stats.chi2.isf(alpha, 1)
+    ws = []
+    for seed in range(1, 17):
+        g = _grid(m, seed)
+        f = fit_output_error(g, (*MODEL, "asymmetry"), equation_error_start(g, MODEL),
+                             start_args={"asymmetry": {"D_axis": axis}}, fixed_args={"asymmetry": {"D_axis": axis}})
+        ws.append(f.wald("asymmetry")[0])
+    ws = np.array(ws)
+    power = float(np.mean(ws > crit))
+    # 16 draws of a 0.8 Bernoulli: 0.5-1.0 holds with probability > 0.99
+    assert 0.5 <= power <= 1.0, (power, ws)
+    # E[W] = q + lambda, Var[W] = 2 (q + 2 lambda) (non-central chi-square): the mean of 16
+    # draws within three of its standard deviations
+    lam = det.noncentrality
+    assert np.mean(ws) == pytest.approx(1 + lam, abs=3 * np.sqrt(2 * (1 + 2 * lam) / len(ws))), ws
+    # and a tenth of that size is not detected
+    m_small = _record(("asymmetry",), {"D": D / 10, "D_axis": axis})
+    g = _grid(m_small, 99)
+    f = fit_output_error(g, (*MODEL, "asymmetry"), equation_error_start(g, MODEL),
+                         start_args={"asymmetry": {"D_axis": axis}}, fixed_args={"asymmetry": {"D_axis": axis}})
+    assert f.wald("asymmetry")[0] < crit + 3
+
+
+def test_the_diagnosis_says_what_it_cannot_decide():
+    from rotor_env.diagnosis.oe_diagnosis import diagnose_output_error
+
+    m = _record(("static_load",), {"load_y": 0.003, "load_x": 0.0})
+    diag = diagnose_output_error(_grid(m, 3), MODEL, ("static_load", "cross_coupled_stiffness", "asymmetry"))
+    assert diag.verdict == "explained"
+    assert set(diag.undecidable) == {"static_load", "cross_coupled_stiffness"}
+    out = diag.to_dict()
+    assert out["undecidable"]["static_load"].startswith("static_load: these data cannot decide it")
+    assert out["detectability"]["asymmetry"]["decidable"] is True
+    assert "what these data cannot decide" in diag.summary()
