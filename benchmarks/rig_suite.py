@@ -154,7 +154,7 @@ def fault_values(spec: RecordSpec, rng: np.random.Generator, peak: float, c: flo
     """The fault's parameters (dimensionless), the displacement-like ones scaled to the
     healthy run's orbit peak ``peak`` (tests/fault_cases.py: bow 0.06, misalignment 0.03,
     load 0.06, rub clearance 0.24-0.4 of a 0.15-0.27 peak; quadratic stiffness 0.02-0.05 at
-    a peak 0.17)."""
+    a peak 0.17, i.e. k A = 0.0034-0.0085 at the record's peak A)."""
     def sign() -> float:
         return float(rng.choice((-1.0, 1.0)))
 
@@ -179,7 +179,9 @@ def fault_values(spec: RecordSpec, rng: np.random.Generator, peak: float, c: flo
     if f == "misalignment":
         return {"misalignment": rng.uniform(0.02, 0.04) * peak, "misalignment_phase": rng.uniform(-math.pi, math.pi)}
     if f == "nonlinear_stiffness":
-        k = (0.17 / peak) ** 2
+        # the quadratic moment k A^2 against the linear A at the peak A: k A = 0.02-0.05 of
+        # 0.17 (tests/fault_cases.py: k 0.02-0.05 at a peak 0.17), whatever the length unit
+        k = 0.17 / peak
         return {n: sign() * rng.uniform(0.02, 0.05) * k for n in ("k30", "k21", "k12", "k03")}
     if f == "static_load":
         a, th = rng.uniform(0.04, 0.08) * peak, rng.uniform(-math.pi, math.pi)

@@ -89,6 +89,19 @@ class Parameter:
     #: the axis at the keyphasor notch, the paper's convention), the output-error fit
     #: (:mod:`rotor_env.diagnosis.output_error`) estimates it with the coefficients
     angle_period: float = 0.0
+    #: > 0: ``[lower, upper]`` hold at a state amplitude of this size and scale as
+    #: ``amplitude_reference / A`` for a record whose peak amplitude is ``A``: a moment
+    #: polynomial's coefficient depends on the length unit, and what is physical is the ratio
+    #: of its moment to the linear one at the amplitudes reached (:meth:`bounds_at`)
+    amplitude_reference: float = 0.0
+
+    def bounds_at(self, amplitude: float | None) -> tuple[float, float]:
+        """The plausible range for a record of peak state amplitude ``amplitude`` (the declared
+        range where the bounds do not scale, or the amplitude is unknown)."""
+        if self.amplitude_reference <= 0 or amplitude is None or not amplitude > 0:
+            return self.lower, self.upper
+        f = self.amplitude_reference / amplitude
+        return self.lower * f, self.upper * f
 
     @property
     def scanned(self) -> bool:
@@ -572,19 +585,24 @@ register_effect(
         candidate=True,
     )
 )
-#: quadratic stiffness: at |theta| = 0.3 the quadratic moment stays below a third of the linear one
-_QUADRATIC = (-0.3, 0.3, "a quadratic restoring moment larger than a third of the linear one at 0.3 rad "
-              "is not a weak non-linearity of an elastic shaft")
+#: quadratic stiffness: at the peak amplitude A the quadratic moment k A^2 stays below a tenth
+#: of the linear one, |k| A <= 0.09: |k| <= 0.3 at A = 0.3 rad, scaled with 0.3 / A
+_QUADRATIC = (-0.3, 0.3, "a quadratic restoring moment larger than a tenth of the linear one at the record's "
+              "peak amplitude (|k| <= 0.3 at 0.3) is not a weak non-linearity of an elastic shaft")
 _LOAD_REASON = "a static tilt above 0.1 rad bends the shaft beyond its elastic range"
 _to, _from = _identity(("k30", "k21", "k12", "k03"))
 register_effect(
     Effect(
         name="nonlinear_stiffness",
         parameters=(
-            Parameter("k30", 0.05, "quadratic stiffness: th_x^2 in the x moment", *_QUADRATIC),
-            Parameter("k21", 0.04, "quadratic stiffness: th_x^2 in y, 2 th_x th_y in x", *_QUADRATIC),
-            Parameter("k12", 0.03, "quadratic stiffness: 2 th_x th_y in y, th_y^2 in x", *_QUADRATIC),
-            Parameter("k03", 0.02, "quadratic stiffness: th_y^2 in the y moment", *_QUADRATIC),
+            Parameter("k30", 0.05, "quadratic stiffness: th_x^2 in the x moment", *_QUADRATIC,
+                      amplitude_reference=0.3),
+            Parameter("k21", 0.04, "quadratic stiffness: th_x^2 in y, 2 th_x th_y in x", *_QUADRATIC,
+                      amplitude_reference=0.3),
+            Parameter("k12", 0.03, "quadratic stiffness: 2 th_x th_y in y, th_y^2 in x", *_QUADRATIC,
+                      amplitude_reference=0.3),
+            Parameter("k03", 0.02, "quadratic stiffness: th_y^2 in the y moment", *_QUADRATIC,
+                      amplitude_reference=0.3),
         ),
         coefficients=("k30", "k21", "k12", "k03"),
         columns=_nonlinear,

@@ -110,3 +110,30 @@ def test_the_diagnosis_says_what_it_cannot_decide():
     assert out["undecidable"]["static_load"].startswith("static_load: these data cannot decide it")
     assert out["detectability"]["asymmetry"]["decidable"] is True
     assert "what these data cannot decide" in diag.summary()
+
+
+def test_a_weak_nonlinearity_at_small_amplitude_is_physical():
+    """A quadratic stiffness is physical by the ratio of its moment to the linear one at the
+    amplitudes reached (|k| A <= 0.09), not by its coefficient: a tilt rig's 0.015 rad peak
+    with k = 3 (k A = 0.045) is named and recovered; the declared [-0.3, 0.3] holds at 0.3."""
+    from rotor_env.diagnosis.oe_diagnosis import diagnose_output_error
+    from rotor_env.effects import EFFECTS
+
+    k30 = EFFECTS["nonlinear_stiffness"].parameters[0]
+    assert k30.bounds_at(0.3) == pytest.approx((-0.3, 0.3))
+    assert k30.bounds_at(0.015) == pytest.approx((-6.0, 6.0))
+    assert EFFECTS["viscous_damping"].parameters[0].bounds_at(0.015) == (
+        EFFECTS["viscous_damping"].parameters[0].lower, EFFECTS["viscous_damping"].parameters[0].upper)
+    ks = {"k30": 3.0, "k21": -2.0, "k12": 2.5, "k03": -3.0}
+    m = _record(("nonlinear_stiffness",), {**ks, "tau": 0.0012})
+    peak = float(np.max(np.hypot(m.theta_x, m.theta_y)))
+    assert 0.01 < peak < 0.03
+    rng = np.random.default_rng(5)
+    noise = 1e-5  # 0.07 % of the peak, as 0.5 um on a 700 um orbit
+    g = ShootingGrid.from_arrays(m.t, m.phi, m.phi_dot, m.theta_x + rng.normal(0, noise, len(m.t)),
+                                 m.theta_y + rng.normal(0, noise, len(m.t)), 0.0, noise_std=noise)
+    diag = diagnose_output_error(g, MODEL, ("nonlinear_stiffness", "misalignment", "asymmetry"))
+    assert diag.added == ["nonlinear_stiffness"], diag.summary()
+    got = diag.parameters()["nonlinear_stiffness"]["values"]
+    for name, v in ks.items():
+        assert got[name] == pytest.approx(v, rel=0.1), got

@@ -364,9 +364,13 @@ def _converge(grid, model, effect, screened):
 
 def _physical_problem(fit: OutputErrorFit, effect: str) -> str:
     vals = fit.parameters(effect)
+    # the record's peak amplitude (model units): a moment polynomial's bounds scale with it
+    peak = float(np.max(np.hypot(fit.grid.y[:, 0], fit.grid.y[:, 1]))) if fit.grid.n else None
     for p in EFFECTS[effect].parameters:
-        if p.name in vals and not p.orientation and not p.contains(vals[p.name]):
-            return (f"not physical: {p.name} = {vals[p.name]:.4g} outside [{p.lower:g}, {p.upper:g}] "
+        lo, hi = p.bounds_at(peak)
+        if p.name in vals and not p.orientation and not lo <= vals[p.name] <= hi:
+            where = f" at this record's peak amplitude {peak:.3g}" if p.amplitude_reference > 0 else ""
+            return (f"not physical: {p.name} = {vals[p.name]:.4g} outside [{lo:.4g}, {hi:.4g}]{where} "
                     f"({p.bounds_reason})")
     return ""
 
