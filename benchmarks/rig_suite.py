@@ -226,8 +226,11 @@ def make_record(spec: RecordSpec, folder: Path) -> tuple[Path, Path, dict]:
     # below it: touched around the critical)
     peak = _orbit_peak(simulate_rig(rig, _params(healthy, {}, rig.ip), **run_kw, noise=0.0), rig)
     extra = {**fault_values(spec, rng, peak, c, scale), **dict(spec.fixed)}
-    runout = float(rng.uniform(3.0, 8.0)) if spec.fault == "runout" else 0.0
-    runout_deg = float(rng.uniform(0.0, 360.0)) if spec.fault == "runout" else 0.0
+    # each probe track its own runout (on a tilt rig the same runout on both planes would be a
+    # parallel offset that the planes' difference cancels: no runout for the tilt model)
+    planes = list(dict.fromkeys(p.plane for p in rig.probes))
+    runout = {pl: float(rng.uniform(3.0, 8.0)) for pl in planes} if spec.fault == "runout" else 0.0
+    runout_deg = {pl: float(rng.uniform(0.0, 360.0)) for pl in planes} if spec.fault == "runout" else 0.0
     run = simulate_rig(rig, _params(healthy, extra, rig.ip), **run_kw, noise=spec.noise_um, runout=runout,
                        runout_phase_deg=runout_deg, seed=spec.seed)
     faulty_peak = _orbit_peak(simulate_rig(rig, _params(healthy, extra, rig.ip), **run_kw, noise=0.0), rig) \

@@ -13,6 +13,7 @@ Everything is reproducible from ``seed``.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,16 +70,22 @@ def simulate_rig(
     rpm_per_s: float = 230.0,
     sample_rate: float = 5000.0,
     noise: float = 0.0,
-    runout: float = 0.0,
-    runout_phase_deg: float = 0.0,
+    runout: float | Mapping[str, float] = 0.0,
+    runout_phase_deg: float | Mapping[str, float] = 0.0,
     seed: int | None = None,
 ) -> RigRun:
     """Simulate a start-up (``rpm_per_s > 0``) or coast-down (``< 0``) as the rig records it.
 
     ``noise`` and ``runout`` are in the rig's displacement unit (um, mil, ...; for volts, in
-    um); the runout is a 1X pattern fixed to the shaft, the same vector for every probe
-    seen from its own angle, as a scratch on the probe track.
+    um); the runout is a 1X pattern fixed to the shaft, the same vector for every probe of a
+    plane seen from its own angle, as a scratch on the probe track.  A mapping plane ->
+    value gives each plane's track its own runout (a real shaft's tracks differ; the same
+    runout on both planes of a tilt rig is a parallel offset, which the planes' difference
+    cancels).
     """
+    def per_plane(v, plane) -> float:
+        return float(v.get(plane, 0.0)) if isinstance(v, Mapping) else float(v)
+
     for name, v in (("natural_rpm", natural_rpm), ("rpm_from", rpm_from), ("rpm_to", rpm_to),
                     ("sample_rate", sample_rate)):
         if not (math.isfinite(v) and v > 0):
@@ -123,8 +130,8 @@ def simulate_rig(
         cols[rig.keyphasor] = kp
     else:
         cols[rig.speed] = meas.phi_dot * w_ref / SPEED_UNITS[rig.speed_unit]
-    r = runout * np.exp(1j * math.radians(runout_phase_deg))
     for p in rig.probes:
+        r = per_plane(runout, p.plane) * np.exp(1j * math.radians(per_plane(runout_phase_deg, p.plane)))
         metres = u * math.cos(p.angle) + v * math.sin(p.angle)
         if rig.model == "tilt":
             metres = rig.planes[p.plane] * metres
