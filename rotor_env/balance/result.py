@@ -27,6 +27,11 @@ COVERS = ("95 % intervals (Student t, Welch-Satterthwaite degrees of freedom of 
           "placement of the weights, or a drift between runs that the repeats do not see")
 
 
+def _amp_unit(unit: str) -> str:
+    """The amplitude unit as the figures write it (``um`` -> ``µm``)."""
+    return "µm" if unit == "um" else unit
+
+
 def polar_ci(U: complex, var: float, tq: float, phase: str) -> tuple[float, float, float, float]:
     """Magnitude, angle (phase convention), and their 95 % half-widths for a circular complex estimate."""
     amp, ang = to_phase(np.array([U]), phase)
@@ -331,60 +336,30 @@ class BalanceResult:
     # ---------------------------------------------------------------- figures
     def plot_polar(self, ax=None):
         """Polar plot: every run's mean vector per probe (first speed ... last), the influence
-        of each plane's trial weight, and the predicted vibration after correction."""
-        import matplotlib.pyplot as plt
+        of each plane's trial weight, and the predicted vibration after correction
+        (:func:`rotor_env.plots.balance.plot_correction_polar`; ``ax``: one polar axes per probe)."""
+        from ..plots.balance import plot_correction_polar
 
         fit, data = self.fit, self.fit.data
-        S, P, J = fit.H.shape
-        fig, axes = plt.subplots(1, P, subplot_kw={"projection": "polar"}, figsize=(4.2 * P, 4.4), squeeze=False)
-        unit = "µm" if data.amp_unit == "um" else data.amp_unit
-        s = int(np.argmax(np.abs(fit.X0).max(axis=1)))
-        R = self.residual[0]
-        for p in range(P):
-            ax = axes[0, p]
-            ax.set_theta_zero_location("N")
-            ax.set_theta_direction(-1 if self.phase == "lag" else 1)
-            for k, run in enumerate(data.runs):
-                amp, ang = to_phase(data.Y[k, :, p], self.phase)
-                ax.plot(np.radians(ang), amp, "o-", ms=4, lw=0.8, label=run)
-            for j, plane in enumerate(fit.campaign.plane_names):
-                kk = int(np.argmax(np.abs(fit.W[:, j])))
-                tip = fit.X0[s, p] + fit.H[s, p, j] * fit.W[kk, j]
-                a0, g0 = to_phase(np.array([fit.X0[s, p], tip]), self.phase)
-                ax.annotate("", xy=(np.radians(g0[1]), a0[1]), xytext=(np.radians(g0[0]), a0[0]),
-                            arrowprops={"arrowstyle": "->", "lw": 1.4})
-                ax.text(np.radians(g0[1]), a0[1], f" H·W {plane}", fontsize=8)
-            ar, gr = to_phase(R[:, p], self.phase)
-            ax.plot(np.radians(gr), ar, "k*", ms=8, label="after correction (predicted)")
-            ax.set_title(f"{data.probes[p]}: 1X [{unit}], phase {self.phase} [deg]", fontsize=9)
-        axes[0, 0].legend(fontsize=7, loc="lower left", bbox_to_anchor=(-0.25, -0.2))
-        fig.suptitle(f"1X vectors per run; arrows: each plane's trial-weight effect at {data.rpm[s]:.0f} rpm", y=1.04)
-        return fig
+        s = int(np.argmax(np.abs(fit.X0).max(axis=1)))  # the speed of the largest reference vector
+        arrows = {}
+        for j, plane in enumerate(fit.campaign.plane_names):
+            kk = int(np.argmax(np.abs(fit.W[:, j])))  # the run that carries this plane's trial weight
+            arrows[plane] = (fit.X0[s], fit.X0[s] + fit.H[s, :, j] * fit.W[kk, j])
+        return plot_correction_polar(data.probes, dict(zip(data.runs, data.Y, strict=True)), self.residual[0],
+                                     arrows, arrow_rpm=float(data.rpm[s]), phase=self.phase,
+                                     amp_unit=_amp_unit(data.amp_unit), ax=ax)
 
     def plot_bode(self, ax=None):
-        """Bode-style: 1X amplitude and phase against speed, before and predicted after correction."""
-        import matplotlib.pyplot as plt
+        """Bode-style: 1X amplitude and phase against speed, before and predicted after correction
+        (:func:`rotor_env.plots.balance.plot_correction_bode`; ``ax``: a pair of axes)."""
+        from ..plots.balance import plot_correction_bode
 
         fit, data = self.fit, self.fit.data
-        P = len(data.probes)
-        fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5.5))
-        unit = "µm" if data.amp_unit == "um" else data.amp_unit
         R, Rvar = self.residual
-        for p in range(P):
-            a0, g0 = to_phase(fit.X0[:, p], self.phase)
-            a1, g1 = to_phase(R[:, p], self.phase)
-            line, = axes[0].plot(data.rpm, a0, "o-", label=f"{data.probes[p]} before (reference)")
-            axes[0].errorbar(data.rpm, a1, yerr=self.tq * np.sqrt(Rvar[:, p] / 2) if self.intervals else None,
-                             fmt="s--", color=line.get_color(), label=f"{data.probes[p]} predicted after")
-            axes[1].plot(data.rpm, g0, "o-", color=line.get_color())
-            axes[1].plot(data.rpm, g1, "s--", color=line.get_color())
-        axes[0].set_ylabel(f"1X amplitude [{unit}]")
-        axes[1].set_ylabel(f"phase {self.phase} [deg]")
-        axes[1].set_xlabel("speed [rpm]")
-        axes[1].set_ylim(0, 360) if self.phase == "lag" else axes[1].set_ylim(-180, 180)
-        axes[0].legend(fontsize=8)
-        axes[0].set_title("before and predicted after the correction (bars: 95 % intervals)")
-        return fig
+        half = self.tq * np.sqrt(Rvar / 2) if self.intervals else None
+        return plot_correction_bode(data.rpm, data.probes, fit.X0, R, half, phase=self.phase,
+                                    amp_unit=_amp_unit(data.amp_unit), ax=ax)
 
     def figures(self) -> dict:
         return {"polar": self.plot_polar(), "bode": self.plot_bode()}

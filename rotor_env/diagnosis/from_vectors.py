@@ -342,22 +342,16 @@ class VectorDiagnosis(Result):
 
     def plot_residual(self, ax=None):
         """|measured - model| against speed, before and after, with the noise floor."""
-        import matplotlib.pyplot as plt
+        from ..plots.diagnosis import plot_residual_by_speed
 
-        fig, ax = (plt.subplots(figsize=(8, 3.5)) if ax is None else (ax.figure, ax))
         rpm = self.table.rpm
-        for fit, label in ((self.before, "start model"), (self.after, "final model")):
-            mag = np.sqrt(np.nanmean(np.abs(fit.residual) ** 2, axis=1))
-            ax.plot(rpm, mag, lw=1, label=f"{label} ({', '.join(fit.model.names)})")
-        ax.axhline(self.noise_floor, color="k", ls="--", lw=0.8, label="noise floor")
-        ax.axhline(FLOOR_RATIO * self.noise_floor, color="k", ls=":", lw=0.8, label=f"{FLOOR_RATIO}x floor")
-        for c in self.after.criticals:
-            ax.axvline(c["rpm"], color="0.6", lw=0.8)
-        ax.set_xlabel("speed [rpm]")
-        ax.set_ylabel(f"1X residual RMS [{_unit_label(self.table.amp_unit)}]")
-        ax.set_title("where the model fails: 1X residual against speed (grey: criticals)")
-        ax.legend(fontsize=8)
-        return fig
+        curves = {f"{label} ({', '.join(fit.model.names)})": (rpm, np.sqrt(np.nanmean(np.abs(fit.residual) ** 2, axis=1)))
+                  for fit, label in ((self.before, "start model"), (self.after, "final model"))}
+        return plot_residual_by_speed(curves, self.noise_floor, quantity="1X residual RMS",
+                                      amp_unit=_unit_label(self.table.amp_unit), speed_label="speed [rpm]",
+                                      floor_ratio=FLOOR_RATIO, marks=[c["rpm"] for c in self.after.criticals],
+                                      title="where the model fails: 1X residual against speed (grey: criticals)",
+                                      ax=ax)
 
     def plot_campbell(self, ax=None):
         """Whirl frequencies of the final model against speed, the 1x line and the criticals."""

@@ -588,42 +588,28 @@ def _segment_speed_and_rms(fit: OutputErrorFit) -> tuple[np.ndarray, np.ndarray]
 
 def plot_residual(diag: OutputErrorDiagnosis, speed_scale: float = 1.0, speed_unit: str = "speed (model units)"):
     """Output-error residual RMS per segment against speed, before and after, with the
-    probes' noise floor: where the starting model fails, and that the added effects close it."""
-    import matplotlib
+    probes' noise floor: where the starting model fails, and that the added effects close it.
+    ``speed_unit``: the speed axis's whole label (``"speed [rpm]"``)."""
+    from ..plots.diagnosis import plot_residual_by_speed
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7.5, 3.6))
     s = diag.unit_scale * diag.probe_factor
-    for fit, label, style in ((diag.before, "starting model", "-"), (diag.after, "final model", "-")):
+    curves = {}
+    for fit, label in ((diag.before, "starting model"), (diag.after, "final model")):
         sp, rms = _segment_speed_and_rms(fit)
-        ax.plot(sp * speed_scale, rms * s, style, label=label)
-    ax.axhline(diag.noise_floor * s, color="k", ls="--", lw=1, label="probes' noise floor")
-    ax.set_xlabel(speed_unit)
-    ax.set_ylabel(f"output-error RMS [{diag.unit or 'model units'}]")
-    ax.set_yscale("log")
-    ax.legend(loc="best", fontsize=8)
-    ax.set_title("Where the model fails: measured minus predicted displacement")
-    fig.tight_layout()
-    return fig
+        curves[label] = (sp * speed_scale, rms * s)
+    return plot_residual_by_speed(curves, diag.noise_floor * s, quantity="output-error RMS",
+                                  amp_unit=diag.unit or "model units", speed_label=speed_unit,
+                                  floor_label="probes' noise floor", log=True,
+                                  title="Where the model fails: measured minus predicted displacement")
 
 
 def plot_response(diag: OutputErrorDiagnosis, speed_scale: float = 1.0, speed_unit: str = "speed (model units)"):
     """Measured and predicted orbit radius against speed (final model)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..plots.diagnosis import plot_orbit_radius
 
     g = diag.after.grid
     s = diag.unit_scale
-    fig, ax = plt.subplots(figsize=(7.5, 3.6))
-    ax.plot(g.phid * speed_scale, np.hypot(g.y[:, 0], g.y[:, 1]) * s, ".", ms=1, alpha=0.4, label="measured")
     pred = diag.after.prediction
-    ax.plot(g.phid * speed_scale, np.hypot(pred[:, 0], pred[:, 1]) * s, "-", lw=0.8, label="final model")
-    ax.set_xlabel(speed_unit)
-    ax.set_ylabel(f"orbit radius [{diag.unit or 'model units'}]")
-    ax.legend(loc="upper left", fontsize=8)
-    fig.tight_layout()
-    return fig
+    return plot_orbit_radius(g.phid * speed_scale, np.hypot(g.y[:, 0], g.y[:, 1]) * s,
+                             np.hypot(pred[:, 0], pred[:, 1]) * s, amp_unit=diag.unit or "model units",
+                             speed_label=speed_unit)

@@ -11,8 +11,9 @@ from ..effects import EFFECTS
 from ..results import Result
 from .candidates import Candidate
 from .compare import Comparison, WindowData, compare, known_values
+from .figures import DiagnosisFigures
 from .model import Model
-from .report import DiagnosisFigures, fit_cell
+from .report import DiagnosisReport, fit_cell
 from .verdict import VERDICT_TEXT
 
 
@@ -53,7 +54,7 @@ class NotIdentifiableResult(Result):
 
 # ------------------------------------------------------------------ the result
 @dataclass
-class Diagnosis(DiagnosisFigures, Result):
+class Diagnosis(DiagnosisFigures, DiagnosisReport, Result):
     """Result of :func:`diagnose`: before/after comparisons, ranking, where it fails."""
 
     source: str | None

@@ -2,7 +2,11 @@
 scikit-learn's displays do; the result objects' ``plot_*`` methods hand them their numbers.
 
 :mod:`.field`: the views a rotordynamics engineer reads (Bode, polar, orbits, waterfall,
-Campbell, parameter tracks).
+Campbell, parameter tracks); :mod:`.diagnosis`: a diagnosis's own figures (compare, residual,
+order map, autocorrelation, candidates, before and after, residual RMS against speed);
+:mod:`.balance`: a balancing's runs and its correction's predicted effect.  The package
+imports numpy, matplotlib and the layers below it only, never the diagnosis or balancing
+that hand it their numbers.
 """
 
 from .field import (

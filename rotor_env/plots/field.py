@@ -31,8 +31,10 @@ import numpy as np
 from ..measurements.vectors import fit_orders, keyphasor_times, order_map
 
 __all__ = [
+    "axis_label",
     "bode_phases",
     "by_speed",
+    "figure_axes",
     "frequency_from_rad",
     "phase_deg",
     "plot_bode",
@@ -76,7 +78,8 @@ def _freq_per_speed(speed_unit: str) -> float:
     return FREQUENCY_UNITS[_unit(speed_unit)][1] / SPEED_FACTORS[speed_unit]
 
 
-def _label(quantity: str, unit: str | None) -> str:
+def axis_label(quantity: str, unit: str | None) -> str:
+    """``"quantity (unit)"``, ``"quantity (dimensionless)"`` where there is no unit."""
     if not unit or unit == "dimensionless":
         return f"{quantity} (dimensionless)"
     return f"{quantity} ({unit})"
@@ -105,7 +108,7 @@ def _alarm_spans(t: np.ndarray, alarms: Sequence[Mapping], groups) -> dict[str, 
     return out
 
 
-def _axes(ax, n: int, figsize=(8, 4), **kw):
+def figure_axes(ax, n: int, figsize=(8, 4), **kw):
     """``(figure, [axes])``: the caller's axes (one, or a sequence of ``n``) or a new figure
     with ``n`` rows."""
     if ax is None:
@@ -179,7 +182,7 @@ def _vector_plot(ax, n: int, speed: np.ndarray, measured: Mapping[str, np.ndarra
     """The opening of the vector plots (Bode, polar): ``(figure, [axes], speed, curves)``,
     the caller's ``n`` axes or a new figure (``axes_kw``: its size, shared axes), the speeds
     as floats and every curve of :func:`_curves`."""
-    fig, axes = _axes(ax, n, **axes_kw)
+    fig, axes = figure_axes(ax, n, **axes_kw)
     return fig, axes, np.asarray(speed, dtype=float), _curves(measured, models)
 
 
@@ -206,9 +209,9 @@ def plot_bode(
         colour = f"C{ch}"
         a_amp.plot(speed, np.abs(X), color=colour, label=label, **style)
         a_ph.plot(speed, ph, color=colour, **style)
-    a_amp.set_ylabel(_label(f"{order}X amplitude", amp_unit))
+    a_amp.set_ylabel(axis_label(f"{order}X amplitude", amp_unit))
     a_ph.set_ylabel(f"{order}X phase {phase} (deg)")
-    a_ph.set_xlabel(_label("speed", speed_unit))
+    a_ph.set_xlabel(axis_label("speed", speed_unit))
     a_amp.legend(fontsize=7, ncol=2)
     a_amp.set_title(f"Bode plot ({order}X, phase {phase}: "
                     + ("x = A cos(φ - lag))" if phase == "lag" else "x = Re(X e^{iφ}))"))
@@ -289,8 +292,8 @@ def plot_polar(
         ax.text(1.08 * r_max * math.cos(a), 1.08 * r_max * math.sin(a), f"{shown}°", fontsize=7,
                 ha="center", va="center", color="0.4")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel(_label(f"{order}X in phase, Re X", amp_unit))
-    ax.set_ylabel(_label(f"{order}X quadrature, Im X", amp_unit))
+    ax.set_xlabel(axis_label(f"{order}X in phase, Re X", amp_unit))
+    ax.set_ylabel(axis_label(f"{order}X quadrature, Im X", amp_unit))
     ax.set_title(f"polar plot ({order}X; angles: phase {phase}; labels: speed in "
                  f"{speed_unit if speed_unit != 'dimensionless' else 'dimensionless units'})", fontsize=9)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0))
@@ -374,8 +377,8 @@ def plot_orbit(
             a.annotate("", xy=(x1[q + 3], y1[q + 3]), xytext=(x1[q], y1[q]),
                        arrowprops={"arrowstyle": "-|>", "color": colour, "lw": 1.5, "mutation_scale": 14})
         a.set_aspect("equal", adjustable="datalim")
-        a.set_xlabel(_label(labels[0], unit))
-        a.set_ylabel(_label(labels[1], unit))
+        a.set_xlabel(axis_label(labels[0], unit))
+        a.set_ylabel(axis_label(labels[1], unit))
         a.set_title(tag, fontsize=9)
         a.axhline(0, color="0.85", lw=0.5, zorder=0)
         a.axvline(0, color="0.85", lw=0.5, zorder=0)
@@ -409,7 +412,7 @@ def plot_waterfall(
     """
     if x_axis not in ("order", "frequency"):
         raise ValueError(f"x_axis must be 'order' or 'frequency', got {x_axis!r}")
-    fig, (ax,) = _axes(ax, 1, figsize=(8, 4.5))
+    fig, (ax,) = figure_axes(ax, 1, figsize=(8, 4.5))
     t, phi = np.asarray(t, dtype=float), np.asarray(phi, dtype=float)
     signal = np.asarray(signal)
     real = not np.iscomplexobj(signal)
@@ -444,8 +447,8 @@ def plot_waterfall(
     if x_axis == "order":
         ax.set_xlabel("rotation order" + (" (+ forward, - backward whirl)" if not real else ""))
     else:
-        ax.set_xlabel(_label("frequency" + (" (+ forward, - backward whirl)" if not real else ""), freq_unit))
-    ax.set_ylabel(_label("speed", speed_unit))
+        ax.set_xlabel(axis_label("frequency" + (" (+ forward, - backward whirl)" if not real else ""), freq_unit))
+    ax.set_ylabel(axis_label("speed", speed_unit))
     ax.set_title(f"waterfall: spectra of {revolutions}-revolution blocks", fontsize=10)
     return fig
 
@@ -483,7 +486,7 @@ def plot_campbell(
     are marked and written in the legend (forward: filled, backward: open; the unbalance
     excites the forward ones, a support anisotropy the backward ones too).
     """
-    fig, (ax,) = _axes(ax, 1, figsize=(7, 4.5))
+    fig, (ax,) = figure_axes(ax, 1, figsize=(7, 4.5))
     speed = np.asarray(speed, dtype=float)
     fps = _freq_per_speed(speed_unit)
     freq_unit = freq_unit or FREQUENCY_UNITS[speed_unit][0]
@@ -520,8 +523,8 @@ def plot_campbell(
         if np.any(pf < 0):
             ax.plot(ps[pf < 0], -pf[pf < 0], "kx", ms=4, label="measured peaks, backward")
     ax.set_ylim(0, y_top)
-    ax.set_xlabel(_label("speed", speed_unit))
-    ax.set_ylabel(_label("whirl frequency", freq_unit))
+    ax.set_xlabel(axis_label("speed", speed_unit))
+    ax.set_ylabel(axis_label("whirl frequency", freq_unit))
     ax.set_title("Campbell diagram (whirl frequencies and n x lines)", fontsize=10)
     ax.legend(fontsize=7, loc="upper left")
     return fig
@@ -565,7 +568,7 @@ def plot_parameter_tracks(
                                 gridspec_kw={"height_ratios": [3, 1][:n_ax]})
         axes = list(axs[:, 0])
     else:
-        fig, axes = _axes(ax, n_ax)
+        fig, axes = figure_axes(ax, n_ax)
     a_tr = axes[0]
     effect_of = {c: e for e, cols in (groups or {}).items() for c in cols}
     for i, (name, v) in enumerate(tracks.items()):
@@ -598,7 +601,7 @@ def plot_parameter_tracks(
         a_tr.set_ylim(lo - pad, hi + pad)
     for a in alarms or ():
         a_tr.axvline(a["t_onset"], color="0.3", ls=":", lw=0.9)
-    a_tr.set_ylabel(_label("coefficient", value_unit))
+    a_tr.set_ylabel(axis_label("coefficient", value_unit))
     what = ("dotted: an alarm's onset" if alarms is not None else "bold: effect significant") if significance or \
         alarms is not None else ""
     what = ", ".join(x for x in (what, "dashed: truth" if truth else "") if x)
@@ -616,7 +619,7 @@ def plot_parameter_tracks(
         a_sig.set_ylim(-0.6, len(names) - 0.4)
         a_sig.set_title("changed or appeared: the monitor's calibrated CUSUM test (rotor_env/monitor/detector.py)"
                         if alarms is not None else "significant (effect-last F test, alpha as given)", fontsize=8)
-        a_sig.set_xlabel(_label("t", time_unit))
+        a_sig.set_xlabel(axis_label("t", time_unit))
     else:
-        a_tr.set_xlabel(_label("t", time_unit))
+        a_tr.set_xlabel(axis_label("t", time_unit))
     return fig
