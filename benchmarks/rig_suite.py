@@ -321,7 +321,8 @@ def run_record(spec: RecordSpec) -> dict:
                vectors_verdict=(d.get("vectors") or {}).get("verdict"), noise_floor=d.get("noise_floor"),
                rms_before=d.get("rms_before"), rms_after=d.get("rms_after"), unit=d.get("unit"),
                parameters=params, rejected=d.get("rejected"), notes=d.get("notes"),
-               undecidable=d.get("undecidable") or {})
+               undecidable=d.get("undecidable") or {},
+               detectability={e: v.get("sentence") for e, v in (d.get("detectability") or {}).items()})
     out["floor_ratio"] = (d["noise_floor"] / out["true_floor"]) if d.get("noise_floor") else None
     f = spec.fault
     out["crack_named_falsely"] = f not in CRACKS and any(c in named for c in CRACKS)
@@ -410,7 +411,8 @@ def failures(outcomes: list[dict]) -> list[str]:
         rej = {k: v for k, v in (o.get("rejected") or {}).items() if k == o["spec"]["fault"]}
         extra += f"; {o['spec']['fault']} turned down: {rej[o['spec']['fault']]}" if rej else ""
         und = (o.get("undecidable") or {}).get(o["spec"]["fault"])
-        extra += f"; said: {und}" if und else ""
+        det = (o.get("detectability") or {}).get(o["spec"]["fault"])
+        extra += f"; said: {und}" if und else (f"; detectability: {det}" if det else "")
         out.append(f"{head} {fault}: named {o['named'] or 'nothing'} (verdict {o['verdict']}; vectors "
                    f"{o['vectors_missing']}), floor {o['floor_ratio'] or math.nan:.2f}x{extra}")
     return out
