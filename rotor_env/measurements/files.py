@@ -32,7 +32,7 @@ from scipy.signal import savgol_filter
 
 from .core import COLUMNS, Measurements
 
-__all__ = ["REQUIRED", "MeasurementError", "check_finite", "check_header", "check_tilt", "check_time", "derive_rates",
+__all__ = ["REQUIRED", "MeasurementError", "PhiUnwrapper", "check_finite", "check_header", "check_tilt", "check_time", "derive_rates",
            "first_step", "load_measurements", "read_table"]
 
 REQUIRED: tuple[str, ...] = ("t", "phi", "theta_x", "theta_y")
@@ -152,6 +152,70 @@ def check_tilt(source, data: np.ndarray, names: Sequence[str], lines=None) -> No
         raise _refuse(MeasurementError, f"{_where(source, lines, r)}, column {names[c]!r}: value {_num(data[r, c])} "
                                         f"is beyond {MAX_TILT:g} rad ({math.degrees(MAX_TILT):.0f} deg), not a shaft's "
                                         "tilt: degrees? (inclinations are in radians)", r)
+
+
+class PhiUnwrapper:
+    """An encoder's spin angle ``phi`` unwrapped chunk by chunk; degrees and aliasing refused.
+
+    The rule: a sampled spin angle never moves by more than pi between two samples (it would
+    alias), so a jump beyond pi while every value seen stays within one turn's span (2 pi)
+    is a wrap, an encoder's [0, 2 pi) or (-pi, pi], and is undone by whole turns (as
+    :func:`numpy.unwrap`).  A jump beyond pi once the values span more than a turn is refused,
+    naming the line after it: "wrapped to 360" (degrees) when they span at most 360 and a
+    step exceeds 300, "jumps from ... (more than half a turn ...)" otherwise.
+
+    The one implementation for every reader: :func:`load_measurements` pushes the whole
+    column once (the span is the column's), :class:`~rotor_env.measurements.stream.StreamReader`
+    pushes chunk after chunk (the span is that of every value seen so far; the last value
+    of a chunk is the one before the next).  :meth:`push` returns ``phi + 2 pi k`` with
+    ``k`` whole turns, so the result does not depend on how the column is cut into chunks.
+    ``unwrapped`` says whether a wrap was undone.
+    """
+
+    __slots__ = ("_last", "_max", "_min", "_turns", "source", "unwrapped")
+
+    def __init__(self, source) -> None:
+        self.source = source
+        self.unwrapped = False
+        self._last = math.nan
+        self._min = math.inf
+        self._max = -math.inf
+        self._turns = 0.0
+
+    def push(self, phi: np.ndarray, lines=None) -> np.ndarray:
+        """The next chunk of ``phi`` (file ``lines``), unwrapped.  A refused chunk raises
+        :class:`MeasurementError` with ``.row``, the index in the chunk of the row after the
+        jump, and leaves the state as it was: the rows before that one can be pushed again."""
+        phi = np.asarray(phi, dtype=float)
+        if not phi.size:
+            return phi
+        shift = 0 if math.isnan(self._last) else 1
+        raw = phi if not shift else np.concatenate([[self._last], phi])
+        steps = np.diff(raw)
+        jumps = np.abs(steps) > math.pi
+        lo, hi = min(self._min, float(phi.min())), max(self._max, float(phi.max()))
+        if not jumps.any():
+            out = phi if not self._turns else phi + 2 * math.pi * self._turns
+        else:
+            j = int(np.argmax(jumps))
+            r = j + 1 - shift
+            if hi - lo > 2 * math.pi + 1e-6:
+                where = f"{_where(self.source, lines, r)}, column 'phi'"
+                if hi - lo <= 360.0 + 1e-6 and float(np.max(np.abs(steps))) > 300.0:
+                    raise _refuse(MeasurementError, f"{where}: wrapped to 360 ({_num(raw[j])} -> {_num(raw[j + 1])}): "
+                                                    "the spin angle is in degrees; convert it to radians", r)
+                raise _refuse(MeasurementError, f"{where}: jumps from {_num(raw[j])} to {_num(raw[j + 1])} between "
+                                                "two samples (more than half a turn: the angle is aliased or not "
+                                                "in radians)", r)
+            # whole turns back at every wrap (within one turn's span a step is at most 2 pi)
+            back = np.where(jumps, -np.sign(steps) * np.floor(np.abs(steps) / (2 * math.pi) + 0.5), 0.0)
+            turns = self._turns + np.concatenate([[0.0], np.cumsum(back)])[shift:]  # of every row of phi
+            out = phi + 2 * math.pi * turns
+            self._turns = float(turns[-1])
+            self.unwrapped = True
+        self._min, self._max = lo, hi
+        self._last = float(phi[-1])
+        return out
 
 
 def read_table(path: str | os.PathLike, *, numeric: Sequence[str] | None = None
@@ -417,28 +481,17 @@ def _check_units(path: Path, out: np.ndarray, idx: dict, lines) -> list[str]:
 
     An encoder reports ``phi`` wrapped to [0, 2 pi) or (-pi, pi]: a sampled spin angle
     never moves by more than pi between samples (that would alias), so jumps beyond pi in
-    a column that stays within one turn are wraps, and are undone.  Degrees are refused
-    with the column named: ``phi`` whose rate is 57x ``phi_dot``, or wrapped to [0, 360);
-    inclinations beyond 1 rad.
+    a column that stays within one turn are wraps, and are undone (:class:`PhiUnwrapper`,
+    given the whole column).  Degrees are refused with the column named: ``phi`` whose
+    rate is 57x ``phi_dot``, or wrapped to [0, 360); inclinations beyond 1 rad.
     """
     notes: list[str] = []
     j_phi = COLUMNS.index("phi")
-    phi = out[:, j_phi]
     t = out[:, 0]
-    jumps = np.abs(np.diff(phi)) > math.pi
-    span = float(phi.max() - phi.min())
-    if jumps.any():
-        r = int(np.argmax(jumps)) + 1
-        if span <= 2 * math.pi + 1e-6:
-            out[:, j_phi] = np.unwrap(phi)
-            notes.append("phi unwrapped (it was wrapped to one turn)")
-        elif span <= 360.0 + 1e-6 and float(np.max(np.abs(np.diff(phi)))) > 300.0:
-            raise MeasurementError(f"{path}, line {lines[r]}, column 'phi': wrapped to 360 ({_num(phi[r - 1])} -> "
-                                   f"{_num(phi[r])}): the spin angle is in degrees; convert it to radians")
-        else:
-            raise MeasurementError(f"{path}, line {lines[r]}, column 'phi': jumps from {_num(phi[r - 1])} to {_num(phi[r])} "
-                                   "between two samples (more than half a turn: the angle is aliased or not in "
-                                   "radians)")
+    phi = PhiUnwrapper(path)
+    out[:, j_phi] = phi.push(out[:, j_phi], lines)
+    if phi.unwrapped:
+        notes.append("phi unwrapped (it was wrapped to one turn)")
     if "phi_dot" in idx:
         rate = np.gradient(out[:, j_phi], t)
         given = out[:, COLUMNS.index("phi_dot")]

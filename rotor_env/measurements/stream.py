@@ -12,7 +12,8 @@ through it); iterating the reader validates them as the model's ten columns.
 Missing rates and accelerations are estimated as ``load_measurements`` does
 (Savitzky-Golay, :func:`rotor_env.measurements.files.derive_rates`), on a sliding buffer: a sample's
 derivative needs half a window of samples after it, so those are held back until they
-arrive (or the stream ends).  An encoder's ``phi`` wrapped to one turn is unwrapped.
+arrive (or the stream ends).  An encoder's ``phi`` wrapped to one turn is unwrapped across
+chunks (:class:`~rotor_env.measurements.files.PhiUnwrapper`, as the batch reader does).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from .files import (
     DERIVABLE,
     REQUIRED,
     MeasurementError,
+    PhiUnwrapper,
     check_finite,
     check_header,
     check_tilt,
@@ -90,10 +92,7 @@ class StreamReader:
         self.error_line: int | None = None
         self._last_t = math.nan
         self._dt = 0.0
-        self._phi_offset = 0.0
-        self._phi_last = math.nan
-        self._phi_min = math.inf
-        self._phi_max = -math.inf
+        self._phi = PhiUnwrapper(self.name)
         self._deriv: SlidingDerivatives | None = None
 
     # ------------------------------------------------------------------ chunks
@@ -358,36 +357,10 @@ class StreamReader:
         for j, c in enumerate(COLUMNS):
             if c in idx:
                 out[:, j] = data[:, idx[c]]
-        out[:, 1] = self._unwrap(out[:, 1], lines)
+        out[:, 1] = self._phi.push(out[:, 1], lines)
         self._last_t = float(t[-1])
         if self._deriv is None and any(c not in idx for c in DERIVABLE):
             self._deriv = SlidingDerivatives([c for c in DERIVABLE if c not in idx], self._dt)
-        return out
-
-    def _unwrap(self, phi: np.ndarray, lines: np.ndarray) -> np.ndarray:
-        """An encoder's angle wrapped to one turn, unwrapped across chunks; degrees refused."""
-        raw = phi if math.isnan(self._phi_last) else np.concatenate([[self._phi_last], phi])
-        jumps = np.abs(np.diff(raw)) > math.pi
-        seen = (self._phi_min, self._phi_max)  # restored on an error: the good rows are validated again
-        self._phi_min = min(self._phi_min, float(phi.min()))
-        self._phi_max = max(self._phi_max, float(phi.max()))
-        out = phi + self._phi_offset
-        if jumps.any():
-            shift = 0 if math.isnan(self._phi_last) else 1
-            r = int(np.argmax(jumps))
-            if self._phi_max - self._phi_min > 2 * math.pi + 1e-6:
-                unit = " (wrapped to 360: degrees; convert to radians)" if self._phi_max - self._phi_min <= 360.0 + 1e-6 \
-                    else " (more than half a turn between samples: aliased or not in radians)"
-                exc = MeasurementError(f"{self.name}, line {lines[r + 1 - shift]}, column 'phi': jumps from "
-                                       f"{float(raw[r])!r} to {float(raw[r + 1])!r}{unit}")
-                exc.row = r + 1 - shift
-                self._phi_min, self._phi_max = seen
-                raise exc
-            steps = np.diff(raw)
-            wraps = np.where(np.abs(steps) > math.pi, -2 * math.pi * np.round(steps / (2 * math.pi)), 0.0)
-            out = phi + self._phi_offset + np.cumsum(wraps)[len(wraps) - len(phi):]
-            self._phi_offset += float(wraps.sum())
-        self._phi_last = float(phi[-1])
         return out
 
 
