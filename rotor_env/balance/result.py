@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..measurements.vectors import to_phase
+from ..results import Result
 from .correction import iso_grade, split_to_holes, weight_of
 from .influence import InfluenceFit, t_quantile
 from .profile import JointUnbalance
@@ -54,20 +54,8 @@ def _interval_keys(amp: float, ang: float, iv: dict | None) -> dict:
             "ci95_deg_range": [ang - below, ang + above]}
 
 
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.generic):
-        x = x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
-
-
 @dataclass
-class BalanceResult:
+class BalanceResult(Result):
     """Everything a balancing campaign says (see :func:`rotor_env.balance.balance`)."""
 
     fit: InfluenceFit
@@ -254,9 +242,6 @@ class BalanceResult:
             "model_based": self.model_based,
             "notes": list(self.notes) + list(data.notes),
         }
-
-    def to_json(self, **kwargs) -> str:
-        return json.dumps(_jsonable(self.to_dict()), **kwargs)
 
     def summary(self) -> str:
         d = self.to_dict()

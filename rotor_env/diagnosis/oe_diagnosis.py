@@ -33,6 +33,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..effects import EFFECTS
+from ..results import Result
 from .detectability import Detectability, assess_all
 from .output_error import (
     OutputErrorFit,
@@ -85,7 +86,7 @@ class Candidate:
 
 
 @dataclass
-class OutputErrorDiagnosis:
+class OutputErrorDiagnosis(Result):
     """The output-error diagnosis of one record (dimensionless inside; ``unit_scale`` maps a
     grid residual to the reporting unit, ``unit`` names it)."""
 
