@@ -137,3 +137,18 @@ def test_a_weak_nonlinearity_at_small_amplitude_is_physical():
     got = diag.parameters()["nonlinear_stiffness"]["values"]
     for name, v in ks.items():
         assert got[name] == pytest.approx(v, rel=0.1), got
+
+
+def test_a_crack_is_tried_in_place_of_the_other_crack():
+    """A breathing crack contains the open one: tried on top of it the two are degenerate, so
+    a crack candidate replaces the model's other crack (and comes with the side load)."""
+    from rotor_env.diagnosis import oe_diagnosis
+    from rotor_env.diagnosis.output_error import library_effects
+
+    lib = library_effects()
+    model = ("unbalance", "viscous_damping", "asymmetry", "static_load")
+    tried = oe_diagnosis._with_side_load(model, "breathing_crack", lib)
+    assert "asymmetry" not in tried and {"breathing_crack", "static_load"} <= {*tried, "breathing_crack"}
+    assert oe_diagnosis._with_side_load(("unbalance", "breathing_crack"), "asymmetry", lib) == (
+        "unbalance", "static_load")
+    assert oe_diagnosis._with_side_load(model, "rub", lib) == model

@@ -383,7 +383,13 @@ def _with_side_load(model: tuple[str, ...], effect: str, lib: Sequence[str]) -> 
     critical -- the field engineer's crack test.  Without the load in the model the crack's
     fit takes that 2X on its asymmetry, which then differs between slow roll and the
     critical and fails the amplitude rule for a crack that is there.  Alone, a static load
-    is a static offset the probes' gap removal takes away; beside a crack it is seen."""
+    is a static offset the probes' gap removal takes away; beside a crack it is seen.
+
+    A crack also *replaces* the other crack of the model: a breathing crack contains the open
+    one (its mean stiffness loss), and fitted on top of it the two are degenerate -- its
+    breathing depth runs off to a value no crack has."""
+    if effect in CRACKS:
+        model = tuple(e for e in model if e not in CRACKS)
     if effect in CRACKS and SIDE_LOAD in lib and SIDE_LOAD not in model:
         return (*model, SIDE_LOAD)
     return model
@@ -561,9 +567,15 @@ def diagnose_output_error(
                              f"the data cannot tell them apart; {chosen.effect} is named "
                              + ("as the simpler (fewer parameters)" if len(fits[r.effect].values)
                                 > len(fits[chosen.effect].values) else "by the information criterion"))
-        added.append(chosen.effect)
-        # the chosen fit's model: a crack comes with the side load it was fitted with
-        cur_model = (*cur_model, *[e for e in fits[chosen.effect].effects if e not in cur_model and e != "stiffness"])
+        # the chosen fit's model: a crack comes with the side load it was fitted with, and
+        # replaces the other crack (_with_side_load)
+        new_model = tuple(e for e in fits[chosen.effect].effects if e != "stiffness")
+        dropped = [e for e in cur_model if e not in new_model]
+        if dropped:
+            notes.append(f"round {rnd}: {chosen.effect} replaces {', '.join(dropped)} (a breathing crack contains "
+                         "the open one)")
+        added = [e for e in added if e not in dropped] + [chosen.effect]
+        cur_model = (*[e for e in cur_model if e in new_model], *[e for e in new_model if e not in cur_model])
         current = fits[chosen.effect]
         say(f"round {rnd}: {chosen.effect} added: residual {current.rms / floor:.3g}x the noise floor")
     # what the data cannot decide: each candidate the final model lacks, asked how much of
