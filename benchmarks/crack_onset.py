@@ -60,6 +60,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"crack D = {args.D:g} at {args.at_rpm:g} rpm ({t_crack:.2f} s), side load {args.side_load:g}, "
           f"{args.noise:g} um noise: verdict {out['verdict']}, named {out['missing'] or 'nothing'}, "
           f"residual {out['rms_ratio_after']:.3f}x the floor, {seconds:.1f} s")
+    if out.get("change"):
+        print(f"  {out['change']['sentence']}")
     return 0
 
 

@@ -332,6 +332,9 @@ def run_record(spec: RecordSpec) -> dict:
         out["right"] = not named and "runout" in vec_missing
     else:
         out["right"] = f in named
+    # every record's rotor is the same from start to end: how often the parameter-constancy
+    # test (information, not a verdict) says otherwise
+    out["change_said"] = bool((d.get("change") or {}).get("changed"))
     out["false_alarm"] = f in ("healthy", "runout") and bool(named)
     # a fault not named that the diagnosis says it cannot decide: the limit stated, not a miss
     out["said_undecidable"] = not out["right"] and f in out["undecidable"]
@@ -352,8 +355,8 @@ def detection_table(outcomes: list[dict]) -> str:
     floor's ratio to the true noise, the crack's errors."""
     lines = ["| probe noise (um) | faults named right | not named, said undecidable | false alarms (healthy, "
              "runout) | crack named for a non-crack fault | floor / true noise: median (range) | crack size error: "
-             "median (max) | crack axis error (deg): median (max) | errors |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "median (max) | crack axis error (deg): median (max) | parameters said not constant (all rotors constant) | errors |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for noise in sorted({o["spec"]["noise_um"] for o in outcomes}):
         rows = [o for o in outcomes if o["spec"]["noise_um"] == noise]
         ok = [o for o in rows if "error" not in o]
@@ -372,6 +375,7 @@ def detection_table(outcomes: list[dict]) -> str:
             f"| {_fmt_range(ratios)} "
             f"| {(f'{statistics.median(sizes):.1f} % ({max(sizes):.1f} %)') if sizes else '-'} "
             f"| {(f'{statistics.median(axes):.1f} ({max(axes):.1f})') if axes else '-'} "
+            f"| {sum(bool(o.get('change_said')) for o in ok)}/{len(ok)} "
             f"| {len(rows) - len(ok)} |")
     return "\n".join(lines)
 

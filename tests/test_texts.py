@@ -61,7 +61,8 @@ def test_rig_summary_gives_the_rms_in_the_rigs_unit():
     diag = diagnose_output_error(grid, ("unbalance", "viscous_damping"), ("shaft_bow",), unit_scale=1000.0,
                                  unit="um")
     rig = SimpleNamespace(model="translation", amp_unit="um", to_metres=lambda v: v * 1e-6, source="rig.yaml")
-    record = SimpleNamespace(rig=rig, source="run.csv", rpm=np.array([300.0, 3000.0]), notes=())
+    record = SimpleNamespace(rig=rig, source="run.csv", rpm=np.array([300.0, 3000.0]), notes=(),
+                             t=np.array([0.0, 12.0]), phi=np.array([0.0, 2000.0]))
     vectors = SimpleNamespace(to_dict=lambda: {"criticals": []}, summary=lambda: "1X summary", missing=())
     rd = RigDiagnosis(record=record, vectors=vectors, diagnosis=diag, w_ref=172.8)
     text = rd.summary()

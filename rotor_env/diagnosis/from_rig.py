@@ -89,7 +89,7 @@ class RigDiagnosis(Result):
         if isinstance(self.diagnosis, OutputErrorDiagnosis):
             byvec = self.named_by_vectors
             d.update({"verdict": self.verdict, "missing": self.missing, "named_by_vectors": byvec,
-                      "undecidable": self.undecidable})
+                      "undecidable": self.undecidable, "change": self.change_when})
             d["notes"] += [f"{e}: named by the 1X vectors; the waveforms' fit is at its floor without it (its "
                            "response there is absorbed by the runout term, the unbalance and the segments' start "
                            "states): they neither confirm nor refute it" for e in byvec]
@@ -101,6 +101,9 @@ class RigDiagnosis(Result):
                  f"VERDICT: {self.verdict}" + (f" -- missing: {', '.join(self.missing)}" if self.missing else "")
                  + " (one conclusion for the record: the waveforms' model holds every sample; the 1X "
                  "vectors below are a part of it)"]
+        change = self.change_when
+        if change is not None:
+            lines.append(change["sentence"])
         if self.undecidable:
             lines.append("what this record cannot decide: " + "; ".join(self.undecidable.values()))
         for c in self.vectors.to_dict()["criticals"]:
@@ -156,6 +159,23 @@ class RigDiagnosis(Result):
             return []
         lib = library_effects()
         return [e for e in self.vectors.missing if e in lib and e not in d.missing]
+
+    @property
+    def change_when(self) -> dict | None:
+        """The waveforms' parameter-constancy test with its break in the file's seconds and rpm."""
+        d = self.diagnosis
+        change = getattr(d, "change", None)
+        if change is None:
+            return None
+        rec = self.record
+        # the grid's time starts one revolution into the record (waveform_grid)
+        ph = rec.phi
+        first = rec.t[ph >= ph[0] + 2 * math.pi]
+        t_s = float((first[0] if len(first) else rec.t[0]) + change.t_break / self.w_ref)
+        rpm = float(np.interp(t_s, rec.t, rec.rpm))
+        out = change.to_dict()
+        out.update(t_s=t_s, rpm=rpm, sentence=change.sentence(f"at {t_s:.2f} s ({rpm:.0f} rpm)"))
+        return out
 
     @property
     def undecidable(self) -> dict[str, str]:

@@ -34,6 +34,7 @@ import numpy as np
 
 from ..effects import EFFECTS
 from ..results import Result
+from .change import ParameterChange, parameter_constancy
 from .detectability import Detectability, assess_all
 from .output_error import (
     OutputErrorFit,
@@ -104,6 +105,8 @@ class OutputErrorDiagnosis(Result):
     #: each library effect the final model lacks: how large it would have to be to show
     #: (:mod:`.detectability`); those it cannot decide at all are in :attr:`undecidable`
     detectability: dict[str, Detectability] = field(default_factory=dict)
+    #: the parameter-constancy test over the record (:mod:`.change`)
+    change: ParameterChange | None = None
 
     @property
     def probe_factor(self) -> float:
@@ -211,6 +214,7 @@ class OutputErrorDiagnosis(Result):
                 for c in self.candidates],
             "rejected": self.rejected,
             "undecidable": self.undecidable,
+            "change": self.change.to_dict() if self.change is not None else None,
             "detectability": {e: d.to_dict() for e, d in self.detectability.items()},
             "seconds": self.seconds,
             "notes": list(self.notes),
@@ -230,6 +234,8 @@ class OutputErrorDiagnosis(Result):
         if self.rejected:
             lines.append("turned down:")
             lines += [f"  {e}: {r}" for e, r in self.rejected.items()]
+        if self.change is not None:
+            lines.append(self.change.sentence())
         if self.undecidable:
             lines.append("what these data cannot decide:")
             lines += [f"  {t}" for t in self.undecidable.values()]
@@ -587,8 +593,14 @@ def diagnose_output_error(
     detect = assess_all(current, left, alpha=alpha / max(len(cands), 1))
     say(f"detectability of {len(detect)} effects not named: "
         f"{sum(not d.decidable for d in detect.values())} cannot be decided")
+    # one model for the whole record: is it the same rotor all through? (a crack that opens
+    # above the critical barely lifts the residual, but the fit's scores drift at its onset)
+    try:
+        change = parameter_constancy(current, alpha=alpha, explained=current.rms / floor <= EXPLAINED_RATIO)
+    except FloatingPointError:
+        change = None
     return OutputErrorDiagnosis(tuple(model), cur_model, base, current, floor, tried, added, unit_scale, unit,
-                                time.perf_counter() - t_start, notes, detect)
+                                time.perf_counter() - t_start, notes, detect, change)
 
 
 # ------------------------------------------------------------------ figures and report

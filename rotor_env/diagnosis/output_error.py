@@ -90,6 +90,7 @@ __all__ = [
     "library_effects",
     "noise_ar1_high_band",
     "noise_std_high_band",
+    "sample_scores",
     "start_from",
 ]
 
@@ -904,6 +905,33 @@ def added_effect_information(fit: OutputErrorFit, effect: str,
     g = A_perp.T @ rt
     score = float(g @ Gi @ g) / lrv if lrv > 0 else 0.0
     return AddedEffectInformation(effect, tuple(eff.coefficients), given, G0, G, cov, absorbed, score, Gi @ g)
+
+
+def sample_scores(fit: OutputErrorFit) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """The fit's scores per grid sample: ``J_k' e_k`` summed over the two channels, with ``J``
+    the Jacobian of every free parameter (the model's, then the probes' offsets and runout)
+    projected on the complement of each segment's start state, ``e`` the residual.  At the
+    optimum they sum to zero; their partial sums are the path of a parameter-constancy test
+    (:mod:`rotor_env.diagnosis.change`).  Returns the samples' times, the scores ``(N, p)``
+    and the parameters' names."""
+    lib = library_effects()
+    kernel = _kernel(lib)
+    active = np.zeros(len(lib), dtype=np.bool_)
+    for e in fit.effects:
+        active[lib.index(e)] = True
+    fixed = {e: {p.name: 0.0 for p in EFFECTS[e].argument_parameters if f"{e}.{p.name}" not in fit.names}
+             for e in fit.effects}
+    pidx, qidx, qlo, qhi, names, _ = _free_layout(kernel, fit.effects, fixed)
+    npq = len(pidx) + len(qidx) + N_OFFSETS
+    grid = fit.grid
+    status, pred, jac = _shoot(kernel, grid, fit.x0, fit.theta_full, fit.arg_full, active, pidx, qidx, qlo, qhi,
+                               fit.offset)
+    if status:
+        raise FloatingPointError("the fitted model diverged on its own record")
+    rt, Jt, _ = _project(grid, grid.y - pred, jac, npq)
+    scores = (Jt * rt[:, None]).reshape(-1, 2, npq).sum(axis=1)
+    t = np.concatenate([grid.t[i0:i1 + 1] for i0, i1 in grid.segments])
+    return t, scores, (*names, "output.offset_x", "output.offset_y", "output.runout_cos", "output.runout_sin")
 
 
 def equation_error_start(grid: ShootingGrid, effects: Sequence[str]) -> dict[str, np.ndarray]:

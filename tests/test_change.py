@@ -1,0 +1,107 @@
+"""Did the rotor change during the record? (rotor_env.diagnosis.change): the sup-LM test's
+null distribution against Andrews' table, its size on constant rotors and its power and
+break time on a crack that appears mid-record, by simulation with known truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rotor_env.diagnosis.change import parameter_constancy, sup_lm_distribution
+from rotor_env.diagnosis.output_error import ShootingGrid, equation_error_start, fit_output_error
+from rotor_env.params import Crack, RotorParams
+from rotor_env.simulator import RunUp, Simulator
+
+MODEL = ("unbalance", "viscous_damping")
+NOISE = 5e-4
+T_END = 300.0
+
+
+def _grid(crack=None, seed=0):
+    p = RotorParams(ip=0.0, effects=("stiffness", "unbalance", "viscous_damping", "asymmetry"),
+                    values={"tau": 0.005, "beta": 0.3, "c": 0.05, "D": 0.0}, crack=crack)
+    m = Simulator(p).run(t_end=T_END, dt=0.04, run_up=RunUp(rate=0.005, speed0=0.4))
+    rng = np.random.default_rng(seed)
+    return ShootingGrid.from_arrays(m.t, m.phi, m.phi_dot, m.theta_x + rng.normal(0, NOISE, len(m.t)),
+                                    m.theta_y + rng.normal(0, NOISE, len(m.t)), 0.0, noise_std=NOISE)
+
+
+def _fit(grid):
+    return fit_output_error(grid, MODEL, equation_error_start(grid, MODEL))
+
+
+def test_null_distribution_matches_andrews_table():
+    """Andrews (1993), Table 1, pi_0 = 0.15, one parameter: 7.17 (10 %), 8.68 (5 %), 12.16 (1 %)."""
+    d = sup_lm_distribution(1)
+    q = lambda a: d[int((1 - a) * len(d))]  # noqa: E731
+    assert q(0.10) == pytest.approx(7.17, abs=0.35)
+    assert q(0.05) == pytest.approx(8.68, abs=0.45)
+    assert q(0.01) == pytest.approx(12.16, abs=1.0)
+    # more parameters, a larger supremum
+    assert sup_lm_distribution(4)[int(0.95 * len(d))] > q(0.05) + 4
+
+
+def test_constant_rotors_are_said_constant():
+    """Size: 12 noise draws of a constant rotor, the test at 5 %: at most 3 rejections
+    (binomial(12, 0.05): P(X >= 4) = 0.002)."""
+    rejections = []
+    for seed in range(12):
+        c = parameter_constancy(_fit(_grid(seed=seed)))
+        assert 0 < c.p_value <= 1 and c.dof >= 5
+        rejections.append(c.significant)
+    assert sum(rejections) <= 3, rejections
+
+
+def test_a_crack_appearing_mid_record_is_a_change_at_its_time():
+    """A crack D = 0.03 appearing at 45 % of the record (just past the critical): a change, found
+    within 5 % of the record of its time, and the diagnosis says so."""
+    from rotor_env.diagnosis.oe_diagnosis import diagnose_output_error
+
+    T = 0.45 * T_END  # just above the critical (speed 1.08), where the response is large
+    grid = _grid(Crack(T, 0.03), seed=7)
+    c = parameter_constancy(_fit(grid))
+    assert c.significant, c
+    assert c.t_break == pytest.approx(T, abs=0.05 * T_END)
+    assert c.fraction == pytest.approx(T / grid.t[-1], abs=0.05)
+    diag = diagnose_output_error(grid, MODEL, ("asymmetry", "shaft_bow"))
+    assert diag.change is not None and diag.change.significant
+    if diag.change.explained:
+        assert diag.change.changed
+        assert "not the same over the record" in diag.summary()
+    assert diag.to_dict()["change"]["significant"] is True
+
+
+def _rig_record(tmp_path, crack_at_rpm=None, seed=3):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from rotor_env.measurements.rig import SPEED_UNITS, load_rig
+    from rotor_env.measurements.waveforms import load_waveforms
+    from rotor_env.rig_simulation import simulate_rig
+
+    (tmp_path / "rig.yaml").write_text("keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n")
+    rig = load_rig(tmp_path / "rig.yaml")
+    w_ref = 1650.0 * SPEED_UNITS["rpm"]
+    crack = None if crack_at_rpm is None else Crack((crack_at_rpm - 300.0) / 300.0 * w_ref, 0.03)
+    p = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "D": 0.0, "D_axis": 0.5236},
+                    effects=("stiffness", "viscous_damping", "unbalance", "asymmetry"), crack=crack)
+    run = simulate_rig(rig, p, natural_rpm=1650.0, rpm_per_s=300.0, sample_rate=10000.0, noise=0.5, seed=seed)
+    pq.write_table(pa.table(run.file_columns()), tmp_path / "run.parquet")
+    return load_waveforms(tmp_path / "run.parquet", rig)
+
+
+def test_rig_crack_appearing_above_the_critical_is_a_change_in_seconds_and_rpm(tmp_path):
+    """benchmarks/crack_onset.py's record: a crack appearing at 2400 rpm (7 s), after the
+    critical, lifts the residual by 2 % only (the record is 'explained' by one model) -- the
+    parameters are said not to be the same over the record, at the crack's time and speed;
+    the same rig without the crack is constant."""
+    from rotor_env.diagnosis.from_rig import diagnose_rig
+
+    out = diagnose_rig(_rig_record(tmp_path, 2400.0)).to_dict()
+    assert out["change"]["changed"], out["change"]
+    assert "not the same over the record, most at" in out["change"]["sentence"]
+    assert out["change"]["t_s"] == pytest.approx(7.0, abs=0.4)
+    assert out["change"]["rpm"] == pytest.approx(2400.0, abs=120.0)
+    (tmp_path / "healthy").mkdir()
+    healthy = diagnose_rig(_rig_record(tmp_path / "healthy", None, seed=4)).to_dict()
+    assert healthy["verdict"] == "explained" and not healthy["change"]["significant"], healthy["change"]
