@@ -833,6 +833,32 @@ def _residual_part(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return A - (B / sc) @ coef
 
 
+def _held_arguments(fit: OutputErrorFit) -> dict[str, dict[str, float]]:
+    """The model's argument parameters the fit held (not among its free names)."""
+    return {e: {p.name: 0.0 for p in EFFECTS[e].argument_parameters if f"{e}.{p.name}" not in fit.names}
+            for e in fit.effects}
+
+
+def _jacobian_along(fit: OutputErrorFit, effects: Sequence[str], theta: np.ndarray, arg: np.ndarray,
+                    fixed: Mapping[str, Mapping[str, float]]):
+    """One simulation with sensitivities of ``effects`` (coefficients ``theta``, arguments
+    ``arg``) from ``fit``'s start states and offsets: ``(names, owners, npar, npq, pred, jac)``,
+    the names and owners of the free parameters and of the four output terms, ``npar`` the
+    model's free parameters, ``npq`` with the output terms."""
+    lib = library_effects()
+    kernel = _kernel(lib)
+    active = np.zeros(len(lib), dtype=np.bool_)
+    for e in effects:
+        active[lib.index(e)] = True
+    pidx, qidx, qlo, qhi, names, owners = _free_layout(kernel, effects, fixed)
+    npar = len(pidx) + len(qidx)
+    status, pred, jac = _shoot(kernel, fit.grid, fit.x0, theta, arg, active, pidx, qidx, qlo, qhi, fit.offset)
+    if status:
+        raise FloatingPointError("the fitted model diverged on its own record")
+    names = (*names, "output.offset_x", "output.offset_y", "output.runout_cos", "output.runout_sin")
+    return names, (*owners, "output", "output", "output", "output"), npar, npar + N_OFFSETS, pred, jac
+
+
 def added_effect_information(fit: OutputErrorFit, effect: str,
                              arguments: Mapping[str, float] | None = None) -> AddedEffectInformation:
     """The information the record ``fit`` was fitted to holds about ``effect`` at zero size
@@ -854,24 +880,14 @@ def added_effect_information(fit: OutputErrorFit, effect: str,
     alo, _ = kernel.arg_slots[effect]
     for q, p in enumerate(eff.argument_parameters):
         arg[alo + q] = given[p.name]
-    active = np.zeros(len(lib), dtype=np.bool_)
-    for e in effects:
-        active[lib.index(e)] = True
     # the model's arguments stay free as they were fitted; the new effect's are held (at
     # zero size they have no sensitivity)
-    fixed = {e: {p.name: 0.0 for p in EFFECTS[e].argument_parameters if f"{e}.{p.name}" not in fit.names}
-             for e in fit.effects}
-    fixed[effect] = dict(given)
-    pidx, qidx, qlo, qhi, names, owners = _free_layout(kernel, effects, fixed)
-    npar = len(pidx) + len(qidx)
-    npq = npar + N_OFFSETS
-    status, pred, jac = _shoot(kernel, grid, fit.x0, theta, arg, active, pidx, qidx, qlo, qhi, fit.offset)
-    if status:
-        raise FloatingPointError("the fitted model diverged on its own record")
+    fixed = {**_held_arguments(fit), effect: dict(given)}
+    names, owners, npar, npq, pred, jac = _jacobian_along(fit, effects, theta, arg, fixed)
     r = grid.y - pred
     mine = [i for i, o in enumerate(owners) if o == effect]
     groups: dict[str, list[int]] = {}
-    for i, o in enumerate(owners):
+    for i, o in enumerate(owners[:npar]):
         if o != effect:
             groups.setdefault(o, []).append(i)
     groups["the probes' offsets and runout"] = list(range(npar, npq))
@@ -914,24 +930,13 @@ def sample_scores(fit: OutputErrorFit) -> tuple[np.ndarray, np.ndarray, tuple[st
     optimum they sum to zero; their partial sums are the path of a parameter-constancy test
     (:mod:`rotor_env.diagnosis.change`).  Returns the samples' times, the scores ``(N, p)``
     and the parameters' names."""
-    lib = library_effects()
-    kernel = _kernel(lib)
-    active = np.zeros(len(lib), dtype=np.bool_)
-    for e in fit.effects:
-        active[lib.index(e)] = True
-    fixed = {e: {p.name: 0.0 for p in EFFECTS[e].argument_parameters if f"{e}.{p.name}" not in fit.names}
-             for e in fit.effects}
-    pidx, qidx, qlo, qhi, names, _ = _free_layout(kernel, fit.effects, fixed)
-    npq = len(pidx) + len(qidx) + N_OFFSETS
+    names, _, _, npq, pred, jac = _jacobian_along(fit, fit.effects, fit.theta_full, fit.arg_full,
+                                                  _held_arguments(fit))
     grid = fit.grid
-    status, pred, jac = _shoot(kernel, grid, fit.x0, fit.theta_full, fit.arg_full, active, pidx, qidx, qlo, qhi,
-                               fit.offset)
-    if status:
-        raise FloatingPointError("the fitted model diverged on its own record")
     rt, Jt, _ = _project(grid, grid.y - pred, jac, npq)
     scores = (Jt * rt[:, None]).reshape(-1, 2, npq).sum(axis=1)
     t = np.concatenate([grid.t[i0:i1 + 1] for i0, i1 in grid.segments])
-    return t, scores, (*names, "output.offset_x", "output.offset_y", "output.runout_cos", "output.runout_sin")
+    return t, scores, names
 
 
 def equation_error_start(grid: ShootingGrid, effects: Sequence[str]) -> dict[str, np.ndarray]:
@@ -970,6 +975,23 @@ def equation_error_start(grid: ShootingGrid, effects: Sequence[str]) -> dict[str
 
 
 # ------------------------------------------------------------------ the probes' noise
+def _high_band(x: np.ndarray, dt: float, f_signal: float):
+    """Welch's periodogram of ``x`` (mean removed) and the band ``(1.5 f_signal, 0.9 Nyquist)``
+    above the signal: ``(f, p, band, nyquist)``; ``f`` is ``None`` where the record is too
+    short or sampled too close to its content for a band to exist."""
+    from scipy.signal import welch
+
+    x = np.asarray(x, float)
+    x = x - np.mean(x)
+    nyq = 0.5 / dt
+    lo = 1.5 * f_signal
+    if not (lo < 0.6 * nyq and len(x) >= 512):
+        return None, None, None, nyq
+    nper = int(min(4096, 2 ** math.floor(math.log2(len(x) / 8))))
+    f, p = welch(x, fs=1.0 / dt, nperseg=nper, detrend="linear")
+    return f, p, (f > lo) & (f < 0.9 * nyq), nyq
+
+
 def noise_ar1_high_band(x: np.ndarray, dt: float, f_signal: float) -> tuple[float, float]:
     """``(std, rho)`` of first-order autoregressive sensor noise from the band above the signal.
 
@@ -983,17 +1005,9 @@ def noise_ar1_high_band(x: np.ndarray, dt: float, f_signal: float) -> tuple[floa
     level of :func:`noise_std_high_band`; where the band is too narrow to read a shape, that
     function's white estimate with ``rho = 0``.
     """
-    from scipy.signal import welch
-
-    x = np.asarray(x, float)
-    x = x - np.mean(x)
-    fs = 1.0 / dt
-    nyq = 0.5 * fs
-    lo = 1.5 * f_signal
-    if lo < 0.6 * nyq and len(x) >= 512:
-        nper = int(min(4096, 2 ** math.floor(math.log2(len(x) / 8))))
-        f, p = welch(x, fs=fs, nperseg=nper, detrend="linear")
-        band = (f > lo) & (f < 0.9 * nyq) & (p > 0)
+    f, p, band, nyq = _high_band(x, dt, f_signal)
+    if f is not None:
+        band = band & (p > 0)
         if band.sum() >= 16:
             w = 2 * math.pi * f[band] * dt
             lp = np.log(p[band])
@@ -1020,21 +1034,11 @@ def noise_std_high_band(x: np.ndarray, dt: float, f_signal: float) -> float:
     (a record sampled barely above its content), the third difference's variance
     (20 sigma^2 for white noise; a smooth signal's third difference is small).
     """
-    from scipy.signal import welch
-
-    x = np.asarray(x, float)
-    x = x - np.mean(x)
-    fs = 1.0 / dt
-    nyq = 0.5 * fs
-    lo = 1.5 * f_signal
-    if lo < 0.6 * nyq and len(x) >= 512:
-        nper = int(min(4096, 2 ** math.floor(math.log2(len(x) / 8))))
-        f, p = welch(x, fs=fs, nperseg=nper, detrend="linear")
-        band = (f > lo) & (f < 0.9 * nyq)
-        if band.sum() >= 8:
-            # the median of an averaged periodogram is ~the mean for white noise (chi^2 with
-            # many degrees of freedom), and a few spikes (a rub's impacts) do not lift it
-            level = float(np.median(p[band]))
-            return math.sqrt(level * nyq)
-    d3 = np.diff(x, 3)
+    f, p, band, nyq = _high_band(x, dt, f_signal)
+    if f is not None and band.sum() >= 8:
+        # the median of an averaged periodogram is ~the mean for white noise (chi^2 with
+        # many degrees of freedom), and a few spikes (a rub's impacts) do not lift it
+        level = float(np.median(p[band]))
+        return math.sqrt(level * nyq)
+    d3 = np.diff(np.asarray(x, float), 3)
     return float(math.sqrt(np.median(d3 * d3) / 0.4549364231195724 / 20.0))
