@@ -156,8 +156,9 @@ def compile_accel(effects: tuple[str, ...]):
 _BOUND: dict[int, object] = {}
 
 
-def _kernel_cache_dir():
-    """Where the generated kernels' sources (and so numba's cache of them) live."""
+def kernel_cache_dir():
+    """Where the generated kernels' sources (and so numba's cache of them) live, and other
+    results computed once per machine (the change test's simulated null distributions)."""
     from pathlib import Path
 
     root = os.environ.get("ROTOR_ID_CACHE_DIR")
@@ -227,7 +228,7 @@ def load_generated(prefix: str, text: str, sources: tuple = ()):
         name = f"{prefix}_{digest.hexdigest()[:20]}"
         if name in sys.modules:
             return sys.modules[name]
-        folder = _kernel_cache_dir() / "kernels"
+        folder = kernel_cache_dir() / "kernels"
         path = folder / f"{name}.py"
         if not path.exists():
             folder.mkdir(parents=True, exist_ok=True)

@@ -105,3 +105,20 @@ def test_rig_crack_appearing_above_the_critical_is_a_change_in_seconds_and_rpm(t
     (tmp_path / "healthy").mkdir()
     healthy = diagnose_rig(_rig_record(tmp_path / "healthy", None, seed=4)).to_dict()
     assert healthy["verdict"] == "explained" and not healthy["change"]["significant"], healthy["change"]
+
+
+def test_the_null_is_simulated_once_and_read_back(tmp_path, monkeypatch):
+    """The simulated null is kept as a plain .npy in the kernel cache folder: read back, the
+    same draws; a damaged file is simulated again, not trusted."""
+    from rotor_env.diagnosis import change
+
+    monkeypatch.setenv("ROTOR_ID_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(change, "_NULL", {})
+    first = change.sup_lm_distribution(3)
+    files = list((tmp_path / "null").glob("sup_lm_p3_*.npy"))
+    assert len(files) == 1
+    monkeypatch.setattr(change, "_NULL", {})
+    assert np.array_equal(change.sup_lm_distribution(3), first)
+    files[0].write_bytes(b"not an array")
+    monkeypatch.setattr(change, "_NULL", {})
+    assert np.array_equal(change.sup_lm_distribution(3), first)
