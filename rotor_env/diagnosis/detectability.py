@@ -77,7 +77,7 @@ class Detectability:
     smallest: dict[str, float]  #: physical parameters at the minimum detectable size, best direction
     smallest_any: dict[str, float]  #: ... least visible direction (inf where nothing is visible)
     coefficients: tuple[str, ...]
-    covariance: np.ndarray  #: HAC covariance of the coefficients' estimate at zero size
+    covariance: np.ndarray  #: the coefficients' estimate's covariance at zero size (long-run variance x G^-1)
     noncentrality: float  #: the Wald statistic's non-centrality needed (level and power)
     alpha: float
     arguments: dict[str, float]
@@ -86,11 +86,6 @@ class Detectability:
     score: float = 0.0
     score_log10_p: float = 0.0
     leaning: dict[str, float] | None = None
-
-    @property
-    def leans(self) -> bool:
-        """The residual leans significantly (at :attr:`alpha`) towards the effect."""
-        return self.score_log10_p < math.log10(self.alpha)
 
     @property
     def decidable(self) -> bool:
@@ -175,13 +170,12 @@ def assess(fit: OutputErrorFit, effect: str, *, alpha: float = 0.05, power: floa
     q = len(best.coefficients)
     lam = required_noncentrality(q, alpha, power)
     lo, hi = best.visible_share
-    w = np.linalg.eigvalsh(best.covariance)
     leaning = ({k: float(v) for k, v in eff.from_coefficients(best.one_step).items()}
                if best.one_step is not None and hi >= 1e-9 else None)
     return Detectability(
         effect, (lo, hi), best.absorbed_by,
         _direction_size(eff, best.covariance, lam, 0, hi),
-        _direction_size(eff, best.covariance, lam, len(w) - 1, lo),
+        _direction_size(eff, best.covariance, lam, q - 1, lo),
         best.coefficients, best.covariance, lam, alpha, best.arguments,
         best.score, chi2_log10_sf(best.score, q), leaning)
 
