@@ -524,8 +524,8 @@ def test_cli_rig_waveforms_find_the_hidden_crack(tmp_path):
     assert out["verdict"] in ("explained_after_adding", "partly_explained")
     crit = _closest(out["criticals"], 1650)
     assert crit["rpm"] == pytest.approx(1650, rel=0.01)
-    assert out["vectors"]["missing"] == ["runout"]  # the probe-track runout, then compensated at slow roll
-    assert any("slow-roll runout" in n for n in out["notes"])
+    assert out["vectors"]["missing"] == ["runout"]  # the probe-track runout, carried by the waveforms' fit
+    assert any("runout seen in the 1X vectors" in n for n in out["notes"])
 
 
 def test_cli_rig_bow_is_one_conclusion_from_vectors_and_waveforms(tmp_path):

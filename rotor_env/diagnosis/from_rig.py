@@ -2,8 +2,9 @@
 
 1. The probes are order-tracked per revolution and the 1X vectors diagnosed
    (:mod:`.from_vectors`): critical speeds in rpm, damping ratios, the natural frequency
-   ``w_ref`` — and probe runout, which is then subtracted from the waveforms (unless the
-   rig description asked for slow-roll compensation, done on loading).
+   ``w_ref`` — and probe runout, which the waveforms' fit then carries as a 1X pattern
+   fixed to the shaft (the slow-roll pattern is subtracted only when the rig description
+   asks for it, on loading).
 2. The probes' noise is read off the band above the rotor's response (white noise: the
    periodogram's level there, :func:`.output_error.noise_std_high_band`).
 3. The waveforms are made dimensionless with ``t' = t w_ref`` and diagnosed on the
@@ -35,9 +36,6 @@ from .output_error import ShootingGrid, noise_std_high_band
 from .synchronous import RUNOUT
 
 __all__ = ["RigDiagnosis", "diagnose_rig"]
-
-#: slow roll: revolutions below this fraction of the first critical
-SLOW_ROLL_FRACTION = 0.3
 
 
 @dataclass
@@ -150,12 +148,15 @@ class RigDiagnosis(Result):
         runout nuisance ``b`` plus an unbalance ``b W^2 / (...)`` plus a term ``-i c W b / (...)``
         that lives only at the critical, at the natural frequency, where the segments' free
         start states absorb it.  The vectors, averaged per revolution and fitted without free
-        states, see that term; the record's conclusion takes their word for it."""
+        states, see that term; the record's conclusion takes their word for it -- unless the
+        waveforms named an effect themselves: its 1X is then in the vectors too, and their
+        model, which lacks it, reads it as what it has (a cracked shaft under its static load
+        turns its deflection into a 1X constant at every speed: runout and a bow to the 1X fit)."""
         from .oe_diagnosis import EXPLAINED_RATIO
         from .output_error import library_effects
 
         d = self.diagnosis
-        if not isinstance(d, OutputErrorDiagnosis) or d.rms_ratio_after > EXPLAINED_RATIO:
+        if not isinstance(d, OutputErrorDiagnosis) or d.rms_ratio_after > EXPLAINED_RATIO or d.added:
             return []
         lib = library_effects()
         return [e for e in self.vectors.missing if e in lib and e not in d.missing]
@@ -212,20 +213,15 @@ def diagnose_rig(
     step("1X vectors: order tracking and the synchronous fit")
     vd = diagnose_vectors(record.vectors((1,)), ip=ip, alpha=alpha)
     if RUNOUT in vd.missing and record.rig.slow_roll_rpm is None:
-        # runout seen in the 1X vectors: compensate it as field engineers do, from the
-        # slow-roll revolutions (well below the critical, where the unbalance response is
-        # a few per cent of the eccentricity) -- not from the 1X fit, which an effect the
-        # 1X model cannot carry (a crack, a rub) would bias
-        crit = vd.to_dict()["criticals"]
-        below = SLOW_ROLL_FRACTION * (crit[0]["rpm"] if crit else vd.after.w_ref / SPEED_UNITS["rpm"])
-        if (record.rpm < below).sum() > 0 and float(record.rpm.min()) < below:
-            try:
-                record = record.compensate_runout(below_rpm=below)
-            except ValueError as exc:
-                record = replace(record, notes=(*record.notes, f"runout not compensated: {exc}"))
-        else:
-            record = replace(record, notes=(*record.notes, f"runout seen in the 1X vectors, but the run has no "
-                                                          f"slow roll below {below:.0f} rpm to take it from"))
+        # runout seen in the 1X vectors: the waveforms' output-error fit carries a probe
+        # track's 1X pattern fixed to the shaft with every model.  The slow-roll pattern is
+        # not subtracted unasked: on a cracked shaft under its static load the slow-roll
+        # revolutions hold the crack's own 1X and 2X (the deflection turning against the
+        # crack), which the crack's model predicts -- subtracted, the crack no longer fits
+        # (rig suite: both breathing cracks on the tilt rig at 1 um were missed so)
+        record = replace(record, notes=(*record.notes, (
+            "runout seen in the 1X vectors: fitted as a 1X pattern fixed to the shaft with the waveforms' model "
+            "(give slow_roll_rpm in the rig file to subtract the whole slow-roll pattern instead)")))
     w_ref = vd.after.w_ref
     if abs(w_ref / vd.before.w_ref - 1.0) > 0.25:
         # the time scale only has to be near the natural frequency (the output-error fit
