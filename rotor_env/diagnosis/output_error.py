@@ -102,10 +102,17 @@ SEGMENT_LENGTH = 12.0
 GRID_DT = 0.12
 #: at least this many samples per revolution at the top speed on the shooting grid
 GRID_PER_TURN = 24
-#: output terms fitted with every model (nuisance parameters): the probes' static offsets
-#: (the gap removed by the mean leaves one) and a runout's 1X pattern (what slow-roll
-#: compensation left)
-N_OFFSETS = 4
+#: output terms fitted with every model (nuisance parameters, in the reading, not in the
+#: rotor: no dynamics): the probes' static offsets (the gap removed by the mean leaves one);
+#: a probe track's runout, a pattern fixed to the shaft angle -- its 1X (an eccentric track
+#: seen by two orthogonal probes: a forward circle, two terms) and its 2X (an oval track:
+#: each probe sees it at twice its own angle, so any 2X pattern of the two axes, four
+#: terms).  Subtracting the slow-roll revolutions instead would take a cracked shaft's own
+#: slow-roll 1X and 2X under its static load with it; fitted with the model, only what is
+#: the same at every speed is taken, and the crack's 2X resonance at half the critical stays.
+OUTPUT_TERMS = ("offset_x", "offset_y", "runout_cos", "runout_sin",
+                "runout2_x_cos", "runout2_x_sin", "runout2_y_cos", "runout2_y_sin")
+N_OFFSETS = len(OUTPUT_TERMS)
 #: forward-difference step for A = df/dx (relative to 1 + |x|) and for the arguments
 _FD_STATE = 1e-7
 _FD_ARG = 1e-6
@@ -480,8 +487,9 @@ class OutputErrorFit:
     grid: ShootingGrid = field(repr=False)
     theta_full: np.ndarray = field(repr=False, default=None)
     arg_full: np.ndarray = field(repr=False, default=None)
-    #: the probes' static offsets (th_x, th_y): the gap voltage's mean removed from a signal
-    #: whose response has a mean of its own leaves one
+    #: the output terms (:data:`OUTPUT_TERMS`): the probes' static offsets (the gap voltage's
+    #: mean removed from a signal whose response has a mean of its own leaves one), the track's
+    #: 1X and 2X runout
     offset: np.ndarray = field(repr=False, default=None)
 
     @property
@@ -553,8 +561,8 @@ def _free_layout(kernel: _Kernel, effects: Sequence[str], fixed_args: Mapping[st
 
 
 def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset):
-    """Predictions and Jacobian columns: coefficients, arguments, the two output offsets,
-    then the segment's start state."""
+    """Predictions and Jacobian columns: coefficients, arguments, the output terms
+    (:data:`OUTPUT_TERMS`), then the segment's start state."""
     npar = len(pidx) + len(qidx)
     nf = npar + N_OFFSETS + 4
     # rows outside the segments (a fit on a subset of them) predict the measurement itself:
@@ -567,18 +575,23 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset):
     inside = np.zeros(grid.n, dtype=bool)
     for i0, i1 in grid.segments:
         inside[i0:i1 + 1] = True
-    # the output's nuisance terms: static offsets (x, y) and a probe-track runout, a 1X
-    # pattern fixed to the shaft, R e^{i phi} in z = th_y + i th_x (no dynamics: it is in
-    # the reading, not in the rotor)
-    s, c = np.sin(grid.phi[inside]), np.cos(grid.phi[inside])
-    pred[inside, 0] += offset[0] + offset[2] * s + offset[3] * c
-    pred[inside, 1] += offset[1] + offset[2] * c - offset[3] * s
+    # the output's nuisance terms (OUTPUT_TERMS): static offsets (x, y); a probe track's 1X
+    # runout R e^{i phi} in z = th_y + i th_x; its 2X, any pattern of 2 phi on each axis
+    phi = grid.phi[inside]
+    s, c = np.sin(phi), np.cos(phi)
+    s2, c2 = np.sin(2 * phi), np.cos(2 * phi)
+    pred[inside, 0] += offset[0] + offset[2] * s + offset[3] * c + offset[4] * c2 + offset[5] * s2
+    pred[inside, 1] += offset[1] + offset[2] * c - offset[3] * s + offset[6] * c2 + offset[7] * s2
     jac[inside, 0, npar] = 1.0
     jac[inside, 1, npar + 1] = 1.0
     jac[inside, 0, npar + 2] = s
     jac[inside, 1, npar + 2] = c
     jac[inside, 0, npar + 3] = c
     jac[inside, 1, npar + 3] = -s
+    jac[inside, 0, npar + 4] = c2
+    jac[inside, 0, npar + 5] = s2
+    jac[inside, 1, npar + 6] = c2
+    jac[inside, 1, npar + 7] = s2
     return status, pred, jac
 
 
@@ -698,8 +711,8 @@ def fit_output_error(
             x0 = previous.x0
     pidx, qidx, qlo, qhi, names, owners = _free_layout(kernel, effects, fixed_args)
     npq = len(pidx) + len(qidx) + N_OFFSETS
-    names = (*names, "output.offset_x", "output.offset_y", "output.runout_cos", "output.runout_sin")
-    owners = (*owners, "output", "output", "output", "output")
+    names = (*names, *(f"output.{n}" for n in OUTPUT_TERMS))
+    owners = (*owners, *("output",) * N_OFFSETS)
     x0 = grid.start_states() if x0 is None else np.array(x0, float)
     offset = previous.offset.copy() if previous is not None else np.zeros(N_OFFSETS)
 
@@ -843,7 +856,7 @@ def _jacobian_along(fit: OutputErrorFit, effects: Sequence[str], theta: np.ndarr
                     fixed: Mapping[str, Mapping[str, float]]):
     """One simulation with sensitivities of ``effects`` (coefficients ``theta``, arguments
     ``arg``) from ``fit``'s start states and offsets: ``(names, owners, npar, npq, pred, jac)``,
-    the names and owners of the free parameters and of the four output terms, ``npar`` the
+    the names and owners of the free parameters and of the output terms, ``npar`` the
     model's free parameters, ``npq`` with the output terms."""
     lib = library_effects()
     kernel = _kernel(lib)
@@ -855,8 +868,8 @@ def _jacobian_along(fit: OutputErrorFit, effects: Sequence[str], theta: np.ndarr
     status, pred, jac = _shoot(kernel, fit.grid, fit.x0, theta, arg, active, pidx, qidx, qlo, qhi, fit.offset)
     if status:
         raise FloatingPointError("the fitted model diverged on its own record")
-    names = (*names, "output.offset_x", "output.offset_y", "output.runout_cos", "output.runout_sin")
-    return names, (*owners, "output", "output", "output", "output"), npar, npar + N_OFFSETS, pred, jac
+    names = (*names, *(f"output.{n}" for n in OUTPUT_TERMS))
+    return names, (*owners, *("output",) * N_OFFSETS), npar, npar + N_OFFSETS, pred, jac
 
 
 def added_effect_information(fit: OutputErrorFit, effect: str,
