@@ -115,7 +115,12 @@ class Detectability:
             text = (f"{self.effect}: these data cannot decide it: {hidden:.{2 if hidden < 99.99 else 4}f} % of its "
                     f"signature is taken by the fit's other terms, most by {look}")
             finite = all(math.isfinite(v) for v in _sizes(self.effect, self.smallest).values())
-            text += f"; only from {small} would it show" if finite else "; it would not show at any size"
+            # the Wald test's threshold on so small a visible part holds only for a model exact
+            # to that level, which no model of a rig is: the record does not try the effect, and a
+            # larger one has gone unseen (the rig suite's cross-couplings, 10x their threshold)
+            text += (f"; what is left would reach the Wald test from {small} if the model were exact to "
+                     f"{_fmt(100 * self.visible[1])} % of the signature, which no model of a rig is: not tried"
+                     if finite else "; it would not show at any size")
             # no word of the score test here: on a part this small of the signature it measures
             # model-form error as much as the effect (module docstring)
             return text
