@@ -63,7 +63,7 @@ def test_rig_summary_gives_the_rms_in_the_rigs_unit():
     rig = SimpleNamespace(model="translation", amp_unit="um", to_metres=lambda v: v * 1e-6, source="rig.yaml")
     record = SimpleNamespace(rig=rig, source="run.csv", rpm=np.array([300.0, 3000.0]), notes=(),
                              t=np.array([0.0, 12.0]), phi=np.array([0.0, 2000.0]))
-    vectors = SimpleNamespace(to_dict=lambda: {"criticals": []}, summary=lambda: "1X summary", missing=())
+    vectors = SimpleNamespace(to_dict=lambda: {"criticals": []}, summary=lambda: "1X summary", missing=(), undecidable={})
     rd = RigDiagnosis(record=record, vectors=vectors, diagnosis=diag, w_ref=172.8)
     text = rd.summary()
     assert text.splitlines()[1].startswith(f"VERDICT: {diag.verdict}")

@@ -143,15 +143,12 @@ class RigDiagnosis(Result):
     def named_by_vectors(self) -> list[str]:
         """Library effects the 1X vectors name that the waveforms' output-error fit leaves
         undecided: its residual already at the floor, so it neither confirms nor refutes them.
-
-        A shaft bow is the case in point: its response ``b / (1 - W^2 + i c W)`` is the
-        runout nuisance ``b`` plus an unbalance ``b W^2 / (...)`` plus a term ``-i c W b / (...)``
-        that lives only at the critical, at the natural frequency, where the segments' free
-        start states absorb it.  The vectors, averaged per revolution and fitted without free
-        states, see that term; the record's conclusion takes their word for it -- unless the
-        waveforms named an effect themselves: its 1X is then in the vectors too, and their
-        model, which lacks it, reads it as what it has (a cracked shaft under its static load
-        turns its deflection into a 1X constant at every speed: runout and a bow to the 1X fit)."""
+        The record's conclusion takes the vectors' word for them -- unless the waveforms named
+        an effect themselves: its 1X is then in the vectors too, and their model, which lacks
+        it, reads it as what it has (a cracked shaft under its static load turns its deflection
+        into a 1X constant at every speed: runout and a bow to the 1X fit).  A shaft bow is
+        named by the vectors only where it fits clearly better than probe runout, which one
+        run seldom allows (``from_vectors._bow_or_runout``)."""
         from .oe_diagnosis import EXPLAINED_RATIO
         from .output_error import library_effects
 
@@ -185,7 +182,12 @@ class RigDiagnosis(Result):
         if not isinstance(d, OutputErrorDiagnosis):
             return {}
         byvec = self.named_by_vectors
-        return {e: t for e, t in d.undecidable.items() if e not in byvec}
+        out = {e: t for e, t in d.undecidable.items() if e not in byvec}
+        # what the 1X vectors cannot tell apart (a bow from runout), beside what the waveforms say
+        for e, t in self.vectors.undecidable.items():
+            if e not in self.missing:
+                out[e] = f"{out[e]}; {t}" if e in out else t
+        return out
 
     @property
     def missing(self) -> list[str]:

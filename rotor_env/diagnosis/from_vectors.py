@@ -54,6 +54,8 @@ SIDE_LOAD = "static_load"
 MIN_GAIN = 0.10
 #: and be significant at this level (HAC Wald test), and stricter than alpha when alpha is loose
 LOG10_P_MAX = -3.0
+#: the effect one run's 1X vectors cannot tell from probe runout (:func:`_bow_or_runout`)
+BOW = "shaft_bow"
 
 
 def vector_noise_floor(table: VectorTable, bands: int = 8, residual: np.ndarray | None = None) -> float:
@@ -209,6 +211,9 @@ class VectorDiagnosis(Result):
     rejected: list[dict] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     phase: str = "lag"
+    #: effects these vectors cannot tell from another term of the model (a shaft bow from
+    #: probe runout: :func:`_bow_or_runout`), with the sentence that says why
+    undecidable: dict[str, str] = field(default_factory=dict)
 
     @property
     def verdict(self) -> str:
@@ -291,6 +296,7 @@ class VectorDiagnosis(Result):
             "unbalance": self.unbalance(),
             "unexplained": self.unexplained_bands() if self.verdict in ("partly_explained", "unexplained") else [],
             "notes": list(self.notes),
+            "undecidable": dict(self.undecidable),
             "standard_errors_kind": "HAC (Newey-West, Bartlett kernel, Andrews bandwidth), scores summed per row",
         }
 
@@ -488,11 +494,13 @@ def diagnose_vectors(
         if skip:
             notes.append(f"probe angles unknown (no rig description): {', '.join(skip)} not tested; give --rig")
             remaining = [c for c in remaining if c not in skip]
+    undecidable: dict[str, str] = {}
     while remaining and len(missing) < max_added:
         if current.rms <= FLOOR_RATIO * floor:
             break
         excess = current.rms ** 2 - floor ** 2
         best = None
+        round_fits: dict[str, VectorFit] = {}
         for cand in remaining:
             trial = current.model.with_effect(cand)
             if cand != RUNOUT and cand != SECOND_MODE and trial.kinds.get(cand) == "rotating" \
@@ -503,6 +511,7 @@ def diagnose_vectors(
             except (ValueError, FloatingPointError) as exc:
                 rejected.append({"effect": cand, "rule": f"cannot be fitted: {exc}"})
                 continue
+            round_fits[cand] = fit
             F, log10_p = _wald(fit, cand)
             gain = (current.rms ** 2 - fit.rms ** 2) / excess if excess > 0 else 0.0
             ok, why = _plausible(fit, cand, current)
@@ -524,6 +533,10 @@ def diagnose_vectors(
                 best = (cand, fit)
         if best is None:
             break
+        best, why = _bow_or_runout(best, round_fits, floor, table.amp_unit)
+        if why:
+            undecidable[BOW] = why
+            notes.append(why)
         missing.append(best[0])
         current = best[1]
         remaining = [c for c in remaining if c != best[0]]
@@ -544,4 +557,36 @@ def diagnose_vectors(
         notes.append(f"noise floor {floor:.3g} {table.amp_unit}: the probes' {probe_floor:.3g} and the keyphasor "
                      f"angle's error ({math.degrees(table.phase_error_rad):.2g} deg RMS, from the pulses' timing "
                      "jitter) times the 1X amplitude")
-    return VectorDiagnosis(table, before, current, missing, floor, tested, rejected, notes, phase)
+    return VectorDiagnosis(table, before, current, missing, floor, tested, rejected, notes, phase,
+                           {e: t for e, t in undecidable.items() if e not in missing})
+
+
+def _bow_or_runout(best: tuple[str, VectorFit], fits: dict[str, VectorFit], floor: float,
+                   unit: str) -> tuple[tuple[str, VectorFit], str]:
+    """A shaft bow or probe runout, as the 1X vectors of one run can tell them.
+
+    A bow ``b`` responds as ``b / (1 - W^2 + i c W)``; a runout ``R`` is read as it is.  With
+    ``R = b`` and the unbalance shifted by ``b (1 - i c)`` the runout model differs from the
+    bow's by ``i c b W (W - 1) / (1 - W^2 + i c W)``, less than ``c b`` at any speed: a few
+    per cent of the bow.  So when the one fits within the 99 % point of a chi-square with the
+    bow's two parameters of the other (in the noise's variance per real component), the run
+    cannot decide; the reading's own term, runout, is kept (naming a bow for a track's runout
+    would be a false alarm, and the slow-roll vector is the same either way), and the bow is
+    said undecidable.  Slow-roll vectors at different times (a thermal bow changes) or a track
+    runout measured on a straight shaft decide."""
+    from scipy.stats import chi2
+
+    other = {BOW: RUNOUT, RUNOUT: BOW}.get(best[0])
+    if other is None or other not in fits or not floor > 0:
+        return best, ""
+    rss = {k: float(np.nansum(np.abs(f.residual) ** 2)) for k, f in ((best[0], best[1]), (other, fits[other]))}
+    gap = 2.0 * abs(rss[other] - rss[best[0]]) / floor ** 2
+    if gap > chi2.ppf(0.99, 2):
+        return best, ""
+    kept = (RUNOUT, fits[RUNOUT]) if best[0] == BOW else best
+    r = kept[1].runout
+    size = float(np.max(np.abs(r))) if r is not None and np.size(r) else math.nan
+    return kept, (f"{BOW}: these 1X vectors cannot tell it from probe runout (the two fits {gap:.2g} noise "
+                  f"variances apart; a bow adds to a runout of its size only a term below c b (c = 2 zeta) beside a "
+                  f"shifted unbalance): the constant 1X vector ({size:.3g} {unit}) is read as runout; slow-roll "
+                  "vectors at different times or a track runout measured on a straight shaft would decide")
