@@ -30,6 +30,7 @@ against probe noise, the per-fault table, every failure, the time per record.
     python benchmarks/rig_suite.py --quick                    # 6 records, ~2 min
     python benchmarks/rig_suite.py --reps 1 --workers 2       # 4 noises x 12 kinds
     python benchmarks/rig_suite.py --noise 0.3 --faults asymmetry,rub --reps 3
+    python benchmarks/rig_suite.py --report seed1.json seed2.json   # the tables of saved runs together
 """
 
 from __future__ import annotations
@@ -464,13 +465,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--resume", action="store_true",
                     help="keep the outcomes already in --out (same seed) and run only the records it lacks")
     ap.add_argument("--skip", default="", help="record indices not to run (comma-separated; e.g. run elsewhere)")
-    ap.add_argument("--report", default=None, metavar="JSON", help="print the tables of a saved run and exit")
+    ap.add_argument("--report", default=None, nargs="+", metavar="JSON",
+                    help="print the tables of saved runs (several: their records together) and exit")
     args = ap.parse_args(argv)
     if args.report:
-        saved = json.loads(Path(args.report).read_text(encoding="utf-8"))
-        print(f"{saved['meta']['command']} (started {saved['meta']['started_utc']}, {saved['meta']['machine']}, "
-              f"{saved['meta']['cpus']} CPUs, {len(saved['outcomes'])} records in {saved['meta']['elapsed_s']:.0f} s)\n")
-        print(report(saved["outcomes"]))
+        outcomes = []
+        for path in args.report:
+            saved = json.loads(Path(path).read_text(encoding="utf-8"))
+            print(f"{path}: {saved['meta']['command']} (started {saved['meta']['started_utc']}, "
+                  f"{saved['meta']['machine']}, {saved['meta']['cpus']} CPUs, {len(saved['outcomes'])} records in "
+                  f"{saved['meta']['elapsed_s']:.0f} s)")
+            outcomes += saved["outcomes"]
+        print()
+        print(report(outcomes))
         return 0
     try:
         noises = tuple(float(x) for x in args.noise.split(",")) if args.noise else (
