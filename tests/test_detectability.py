@@ -5,6 +5,8 @@ own Wald test detects, checked by simulation with known truth."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -207,3 +209,27 @@ def test_a_decidable_lean_that_an_undecidable_effect_outdoes_is_its_trace():
     # an undecidable lean between the two: only the one that outdoes it is tried
     between = {**weak_nonlinearity, "shaft_bow": d("shaft_bow", 5.8e-6, -150.0)}
     assert _leaning(between, level) == (["nonlinear_stiffness"], "shaft_bow")
+
+
+def test_the_relevance_rule_raises_the_size_an_effect_must_have():
+    """An effect lowers the residual energy by its Wald non-centrality times the long-run
+    variance, so the diagnosis's relevance rule (a minimum fall) asks for the size at which the
+    non-centrality is ``min_fall / s^2``: with a fall ten times the Wald test's need the size
+    is sqrt(10) times the Wald test's, and the sentence says which rule binds."""
+    fit = _fit(_grid(_record(), 3))
+    from rotor_env.diagnosis.output_error import added_effect_information
+
+    wald = assess(fit, "asymmetry", alpha=0.01)
+    assert wald.noncentrality == pytest.approx(wald.wald_noncentrality)
+
+    ae = added_effect_information(fit, "asymmetry", dict(wald.arguments))
+    s2 = float(np.trace(ae.covariance @ ae.information))
+    strict = assess(fit, "asymmetry", alpha=0.01, min_fall=10.0 * wald.wald_noncentrality * s2)
+    assert strict.noncentrality == pytest.approx(10.0 * wald.wald_noncentrality, rel=1e-9)
+    assert abs(strict.smallest["D"]) == pytest.approx(math.sqrt(10.0) * abs(wald.smallest["D"]), rel=1e-6)
+    assert strict.smallest_wald["D"] == pytest.approx(wald.smallest["D"], rel=1e-9)
+    assert "would be named from" in strict.sentence() and "the Wald test alone" in strict.sentence()
+    # the fall an effect of that size gives is the fall asked for
+    D = abs(strict.smallest["D"])
+    theta = np.array([D])
+    assert float(theta @ ae.information @ theta) == pytest.approx(10.0 * wald.wald_noncentrality * s2, rel=1e-6)

@@ -263,6 +263,13 @@ class OutputErrorDiagnosis(Result):
         return "\n".join(lines)
 
 
+def _excess(fit: OutputErrorFit, floor: float) -> float:
+    """The residual energy above the noise floor that a candidate's relevance is measured
+    against: never less than the floor's own uncertainty's share (:data:`FLOOR_UNCERTAINTY`)."""
+    noise = floor * floor * fit.n_rows
+    return max(fit.rss - noise, ((1.0 + FLOOR_UNCERTAINTY) ** 2 - 1.0) * noise)
+
+
 def _leaning(detect: dict[str, Detectability], level: float) -> tuple[list[str], str]:
     """The decidable candidates whose score test at the current fit rejects zero at ``level``
     and leans harder than towards any undecidable effect, strongest first; and the undecidable
@@ -520,7 +527,8 @@ def diagnose_output_error(
         todo = [c for c in cands if c not in cur_model]
         if current.rms / floor <= SEARCH_RATIO:
             # the residual energy cannot tell; the score tests can (module docstring)
-            detect, detect_of = assess_all(current, undetermined(cur_model), alpha=alpha / n_lib), current
+            detect, detect_of = assess_all(current, undetermined(cur_model), alpha=alpha / n_lib,
+                                           min_fall=RELEVANT_SHARE * _excess(current, floor)), current
             todo, trace = _leaning(detect, alpha / n_lib)
             if trace:
                 notes.append(f"round {rnd}: the residual ({current.rms / floor:.4g}x the floor) leans most towards "
@@ -535,8 +543,7 @@ def diagnose_output_error(
                          + ", ".join(f"{c} (score test log10 p = {detect[c].score_log10_p:.3g})"
                                      for c in todo if c in detect)
                          + ": tried")
-        excess = max(current.rss - floor * floor * current.n_rows,
-                     ((1.0 + FLOOR_UNCERTAINTY) ** 2 - 1.0) * floor * floor * current.n_rows)
+        excess = _excess(current, floor)
         fits = {}
         step(f"waveforms, round {rnd}: output-error screening of each candidate", total=len(todo), unit="candidates")
         for c in todo:
@@ -652,7 +659,8 @@ def diagnose_output_error(
     # to show (a static load in the probes' offsets, a cross-coupling in the damping)
     step("waveforms: what the record cannot decide (detectability of the effects not named)")
     if detect_of is not current:
-        detect = assess_all(current, undetermined(cur_model), alpha=alpha / n_lib)
+        detect = assess_all(current, undetermined(cur_model), alpha=alpha / n_lib,
+                            min_fall=RELEVANT_SHARE * _excess(current, floor))
     say(f"detectability of {len(detect)} effects not named: "
         f"{sum(not d.decidable for d in detect.values())} cannot be decided")
     # one model for the whole record: is it the same rotor all through? (a crack that opens
