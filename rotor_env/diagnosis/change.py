@@ -26,8 +26,9 @@ parameters).
 It is information, not a verdict.  In a sweep time and speed go together, so a parameter that
 depends on speed (a cross-coupling reads as a damping ``c - q/w``) is a "change" too, and the 1X
 terms carry the instrument's spin-angle and runout errors: on the rig suite's constant rotors
-(``benchmarks/rig_suite.py --seed 5``) 11 of 44 records were "not the same" -- the cross-coupled
-ones, and at 2.5 kHz the 1X terms.
+(``benchmarks/rig_suite.py``, seeds 1-5, 220 records) 46 were "not the same" -- 11 of the 20
+cross-couplings, 9 of the 20 bows (read as runout, their trace drifts), the rest mostly at
+0.1 um (25 of 55 there) and at 2.5-5 kHz, through the 1X terms.
 
 What it assumes: the model is right on each side of the break.  A model that misses an
 effect everywhere (a residual well above the floor) also makes the scores drift, so a
@@ -116,7 +117,7 @@ class ParameterChange:
     def changed(self) -> bool:
         """Not the same parameters over the record, on an otherwise explained record: a change
         of the rotor, a parameter that depends on speed, or an instrument's drift (information,
-        not a verdict: on the rig suite's constant rotors 11 of 44 records said so)."""
+        not a verdict: on the rig suite's constant rotors 46 of 220 records said so)."""
         return self.significant and self.explained
 
     def sentence(self, when: str = "") -> str:
