@@ -5,8 +5,9 @@
    ``w_ref`` — and probe runout, which the waveforms' fit then carries as a 1X pattern
    fixed to the shaft (the slow-roll pattern is subtracted only when the rig description
    asks for it, on loading).
-2. The probes' noise is read off the band above the rotor's response (white noise: the
-   periodogram's level there, :func:`.output_error.noise_std_high_band`).
+2. The probes' noise is read off the band above the rotor's response: first-order
+   autoregressive noise from the periodogram's shape and level there (white noise: rho ~ 0;
+   a filtered channel's coloured noise: :func:`.output_error.noise_ar1_high_band`).
 3. The waveforms are made dimensionless with ``t' = t w_ref`` and diagnosed on the
    **output error** (:mod:`.oe_diagnosis`): every candidate fitted to the measured
    displacements, every decision (significance, relevance, the crack-vs-rub rules, the
@@ -32,7 +33,7 @@ from ..results import Result
 from .from_vectors import VectorDiagnosis, diagnose_vectors
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES
 from .oe_diagnosis import OutputErrorDiagnosis, diagnose_output_error
-from .output_error import ShootingGrid, noise_std_high_band
+from .output_error import ShootingGrid, noise_ar1_high_band
 from .synchronous import RUNOUT
 
 __all__ = ["RigDiagnosis", "diagnose_rig"]
@@ -251,8 +252,11 @@ def waveform_grid(record: RigRecord, w_ref: float) -> tuple[ShootingGrid, float]
     dt = float(np.median(np.diff(record.t)))
     # the response holds the orders up to 3 of the top speed and the natural frequency
     f_top = 4.0 * max(float(np.max(record.speed)), w_ref) / (2 * math.pi)
-    sigma = math.sqrt(0.5 * (noise_std_high_band(record.u, dt, f_top) ** 2
-                             + noise_std_high_band(record.v, dt, f_top) ** 2))
+    # first-order autoregressive noise read off the band's shape (white noise: rho ~ 0): a probe
+    # driver's or a DAQ's filter colours it, and read as white, noise with rho = 0.7 put the floor
+    # 3.3x too low and a healthy record was 'unexplained'
+    (su, ru), (sv, rv) = (noise_ar1_high_band(x, dt, f_top) for x in (record.u, record.v))
+    sigma, rho = math.sqrt(0.5 * (su * su + sv * sv)), 0.5 * (ru + rv)
     # the first and last revolution are left out (the keyphasor's speed is extrapolated there)
     ph = record.phi
     keep = (ph >= ph[0] + 2 * math.pi) & (ph <= ph[-1] - 2 * math.pi)
@@ -261,7 +265,8 @@ def waveform_grid(record: RigRecord, w_ref: float) -> tuple[ShootingGrid, float]
     t = (record.t[keep] - record.t[keep][0]) * w_ref
     phi, speed = smooth_spin(record.t[keep], ph[keep])
     grid = ShootingGrid.from_arrays(t, phi, speed / w_ref, record.v[keep] / scale,
-                                    record.u[keep] / scale, record.rig.ip, noise_std=max(sigma / scale, 1e-15))
+                                    record.u[keep] / scale, record.rig.ip, noise_std=max(sigma / scale, 1e-15),
+                                    noise_rho=rho)
     return grid, scale
 
 
