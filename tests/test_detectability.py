@@ -233,3 +233,36 @@ def test_the_relevance_rule_raises_the_size_an_effect_must_have():
     D = abs(strict.smallest["D"])
     theta = np.array([D])
     assert float(theta @ ae.information @ theta) == pytest.approx(10.0 * wald.wald_noncentrality * s2, rel=1e-6)
+
+
+def test_a_candidate_that_pushes_the_models_own_parameter_out_of_range_is_not_physical():
+    """The held-out rig suite's record (seed 7, a 4 um bow at 0.1 um): a cross-coupling of
+    -0.055 fitted the bow's small trace by driving the damping to -0.007 -- degenerate through
+    one critical (``c - q/w``), and named.  A candidate is now also turned down when the model's
+    own parameter leaves its declared range with it (and only then: one already outside stays
+    the model's matter, not the candidate's)."""
+    from types import SimpleNamespace
+
+    from rotor_env.diagnosis.oe_diagnosis import _physical_problem
+
+    grid = SimpleNamespace(y=np.full((10, 2), 0.01), n=10)
+    effects = ("stiffness", "viscous_damping", "unbalance", "cross_coupled_stiffness")
+
+    def fit(c, q):
+        vals = {"stiffness": {"k": 1.0}, "viscous_damping": {"c": c}, "unbalance": {"tau": 0.004, "beta": 2.76},
+                "cross_coupled_stiffness": {"cross_coupling": q}}
+        return SimpleNamespace(grid=grid, effects=effects, parameters=lambda e: vals[e])
+
+    base = SimpleNamespace(grid=grid, effects=effects[:3],
+                           parameters=lambda e: {"stiffness": {"k": 1.0}, "viscous_damping": {"c": 0.048},
+                                                 "unbalance": {"tau": 0.004, "beta": 2.76}}[e])
+    why = _physical_problem(fit(-0.0074, -0.055), "cross_coupled_stiffness", base)
+    assert why.startswith("not physical: with it the model's c = -0.0074"), why
+    assert _physical_problem(fit(0.03, 0.02), "cross_coupled_stiffness", base) == ""
+    # the candidate's own parameter first
+    assert "cross_coupling = -0.2" in _physical_problem(fit(0.03, -0.2), "cross_coupled_stiffness", base)
+    # a damping already outside before the candidate is not held against it
+    base_bad = SimpleNamespace(grid=grid, effects=effects[:3],
+                               parameters=lambda e: {"stiffness": {"k": 1.0}, "viscous_damping": {"c": -0.01},
+                                                     "unbalance": {"tau": 0.004, "beta": 2.76}}[e])
+    assert _physical_problem(fit(-0.0074, 0.02), "cross_coupled_stiffness", base_bad) == ""
