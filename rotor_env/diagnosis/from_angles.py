@@ -37,7 +37,7 @@ from .output_error import (
     equation_error_start,
     fit_output_error,
     library_effects,
-    noise_ar1_high_band,
+    noise_ar1_two_channels,
 )
 from .scaling import rescale_time
 
@@ -59,8 +59,7 @@ def angle_noise(meas: Measurements) -> tuple[float, float]:
     dt = float(np.median(np.diff(t)))
     top = float(np.nanmax(np.abs(meas.phi_dot))) if len(t) else 0.0
     f_top = 4.0 * max(top, 1.0) / (2 * math.pi)
-    (sx, rx), (sy, ry) = (noise_ar1_high_band(x, dt, f_top) for x in (meas.theta_x, meas.theta_y))
-    return math.sqrt(0.5 * (sx * sx + sy * sy)), 0.5 * (rx + ry)
+    return noise_ar1_two_channels(meas.theta_x, meas.theta_y, dt, f_top)
 
 
 def needs_output_error(meas: Measurements) -> bool:

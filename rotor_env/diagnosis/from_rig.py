@@ -7,7 +7,7 @@
    asks for it, on loading).
 2. The probes' noise is read off the band above the rotor's response: first-order
    autoregressive noise from the periodogram's shape and level there (white noise: rho ~ 0;
-   a filtered channel's coloured noise: :func:`.output_error.noise_ar1_high_band`).
+   a filtered channel's coloured noise: :func:`.output_error.noise_ar1_two_channels`).
 3. The waveforms are made dimensionless with ``t' = t w_ref`` and diagnosed on the
    **output error** (:mod:`.oe_diagnosis`): every candidate fitted to the measured
    displacements, every decision (significance, relevance, the crack-vs-rub rules, the
@@ -33,7 +33,7 @@ from ..results import Result
 from .from_vectors import VectorDiagnosis, diagnose_vectors
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES
 from .oe_diagnosis import OutputErrorDiagnosis, diagnose_output_error
-from .output_error import ShootingGrid, noise_ar1_high_band
+from .output_error import ShootingGrid, noise_ar1_two_channels
 from .synchronous import RUNOUT
 
 __all__ = ["RigDiagnosis", "diagnose_rig"]
@@ -255,8 +255,7 @@ def waveform_grid(record: RigRecord, w_ref: float) -> tuple[ShootingGrid, float]
     # first-order autoregressive noise read off the band's shape (white noise: rho ~ 0): a probe
     # driver's or a DAQ's filter colours it, and read as white, noise with rho = 0.7 put the floor
     # 3.3x too low and a healthy record was 'unexplained'
-    (su, ru), (sv, rv) = (noise_ar1_high_band(x, dt, f_top) for x in (record.u, record.v))
-    sigma, rho = math.sqrt(0.5 * (su * su + sv * sv)), 0.5 * (ru + rv)
+    sigma, rho = noise_ar1_two_channels(record.u, record.v, dt, f_top)
     # the first and last revolution are left out (the keyphasor's speed is extrapolated there)
     ph = record.phi
     keep = (ph >= ph[0] + 2 * math.pi) & (ph <= ph[-1] - 2 * math.pi)

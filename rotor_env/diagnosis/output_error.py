@@ -89,6 +89,7 @@ __all__ = [
     "fit_output_error",
     "library_effects",
     "noise_ar1_high_band",
+    "noise_ar1_two_channels",
     "noise_std_high_band",
     "sample_scores",
     "start_from",
@@ -1036,6 +1037,13 @@ def noise_ar1_high_band(x: np.ndarray, dt: float, f_signal: float) -> tuple[floa
             var_e = math.exp(level) * nyq
             return math.sqrt(var_e / (1.0 - rho * rho)), rho
     return noise_std_high_band(x, dt, f_signal), 0.0
+
+
+def noise_ar1_two_channels(x: np.ndarray, y: np.ndarray, dt: float, f_signal: float) -> tuple[float, float]:
+    """:func:`noise_ar1_high_band` of two channels measured alike (the two axes of an orbit):
+    their variances and lag-one correlations averaged."""
+    (sx, rx), (sy, ry) = (noise_ar1_high_band(c, dt, f_signal) for c in (x, y))
+    return math.sqrt(0.5 * (sx * sx + sy * sy)), 0.5 * (rx + ry)
 
 
 def noise_std_high_band(x: np.ndarray, dt: float, f_signal: float) -> float:
