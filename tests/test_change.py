@@ -48,6 +48,7 @@ def test_constant_rotors_are_said_constant():
     for seed in range(12):
         c = parameter_constancy(_fit(_grid(seed=seed)))
         assert 0 < c.p_value <= 1 and c.dof >= 5
+        assert c.method == "bridge"  # 25 shooting segments: too few blocks for 12 parameters
         rejections.append(c.significant)
     assert sum(rejections) <= 3, rejections
 
@@ -99,6 +100,7 @@ def test_rig_crack_appearing_above_the_critical_is_a_change_in_seconds_and_rpm(t
 
     out = diagnose_rig(_rig_record(tmp_path, 2400.0)).to_dict()
     assert out["change"]["changed"], out["change"]
+    assert out["change"]["method"] == "blocks"  # a rig record: the information's own path
     assert "not the same over the record, most at" in out["change"]["sentence"]
     assert out["change"]["t_s"] == pytest.approx(7.0, abs=0.4)
     assert out["change"]["rpm"] == pytest.approx(2400.0, abs=120.0)

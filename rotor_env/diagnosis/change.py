@@ -6,29 +6,35 @@ assumption, and the fit then averages two rotors.  A crack appearing above the c
 speed changes the small response there by a fraction of a micrometre: the whole record's
 residual barely rises above the noise floor, yet the fit's own scores show it.
 
-The test (Andrews 1993, the sup-LM test for a structural break at an unknown time; the
-score form of Hansen's 1992 test): with ``s_k = J_k' e_k`` the fit's score of sample ``k``
+The test (Andrews 1993, the sup-LM test for a structural break at an unknown time): with
+``s_k = J_k' e_k`` the fit's score of sample ``k``
 (:func:`~rotor_env.diagnosis.output_error.sample_scores`: every free parameter, projected on
-the complement of the segments' start states), ``S_k`` their partial sums (zero at the end:
-the fit's normal equations), ``V`` their long-run covariance per sample (Bartlett, Andrews'
-bandwidth) and ``lambda = k / n``,
+the complement of the segments' start states) and ``S_k`` their partial sums (zero at the end:
+the fit's normal equations), ``LM_k = S_k' W_k^-1 S_k`` is the Lagrange-multiplier statistic
+of "every parameter changes at ``k``", ``W_k`` the variance of ``S_k`` under a constant rotor.
 
-    LM(lambda) = S_k' V^-1 S_k / (n lambda (1 - lambda))
-
-is the Lagrange-multiplier statistic of "every parameter changes at ``k``".  Under a constant
-rotor its supremum over ``lambda`` in ``[trim, 1 - trim]`` converges to the supremum of a
-squared ``p``-dimensional Brownian bridge over ``lambda (1 - lambda)``; its critical values are
-simulated here (seeded, cached per ``p``) -- Andrews' Table 1 gives 8.68 at 5 % for ``p = 1``
-and ``trim = 0.15``, reproduced by the tests.  The break is where the supremum is; what moved
-is read off the partial sums there, effect by effect (the same statistic on each effect's
-parameters).
+A run-up gathers most of its information in the seconds at the critical speed, so ``W_k`` is
+built from the fit's own information and scores as they accumulate, summed over blocks of
+whole shooting segments (the scores are exact over whole segments), each at least five
+correlation times of the probes' noise -- measured above the signal band, not read off the
+residual, whose slow misfit under a change would hide it -- and the supremum's null is drawn
+by a block multiplier bootstrap (:func:`identifier.breaks.sup_lm_test`, which says why the
+textbook null would be wrong here).  A record with too few blocks for that (fewer than
+eight per parameter: a short angle record) gets the textbook form: ``W_k = n lambda
+(1 - lambda) V`` with ``V`` the scores' long-run covariance per sample (Bartlett, Andrews'
+bandwidth), ``lambda = k / n``, whose supremum converges to that of a squared ``p``-dimensional
+Brownian bridge over ``lambda (1 - lambda)`` (critical values simulated here, seeded and
+cached per ``p``; Andrews' Table 1 gives 8.68 at 5 % for ``p = 1``, reproduced by the tests).
+The break is dated by least squares (Bai 1997) with the blocks, at the supremum with the
+textbook form; what moved is read off the partial sums there, effect by effect (the same
+statistic on each effect's parameters).
 
 It is information, not a verdict.  In a sweep time and speed go together, so a parameter that
 depends on speed (a cross-coupling reads as a damping ``c - q/w``) is a "change" too, and the 1X
 terms carry the instrument's spin-angle and runout errors: on the rig suite's constant rotors
-(``benchmarks/rig_suite.py``, seeds 1-5, 220 records) 46 were "not the same" -- 11 of the 20
-cross-couplings, 9 of the 20 bows (read as runout, their trace drifts), the rest mostly at
-0.1 um (25 of 55 there) and at 2.5-5 kHz, through the 1X terms.
+(``benchmarks/rig_suite.py``) most "not the same" are cross-couplings, bows (read as runout,
+their trace drifts) and records at 2.5-5 kHz and 0.1 um, where the keyphasor's sampled edges
+put milliradians of error into the spin angle at top speed and the 1X terms drift with it.
 
 What it assumes: the model is right on each side of the break.  A model that misses an
 effect everywhere (a residual well above the floor) also makes the scores drift, so a
@@ -44,6 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from identifier.breaks import MAX_BLOCKS, MIN_BLOCKS_PER_PARAMETER, sup_lm_test
 from identifier.hac import andrews_bandwidth, long_run_covariance
 
 from .output_error import OutputErrorFit, sample_scores
@@ -56,6 +63,11 @@ TRIM = 0.15
 _PATHS = 4000
 _GRID = 1000
 _NULL: dict[tuple[int, float], np.ndarray] = {}
+#: bootstrap draws of the blocks' null (seeded: the same answer every run)
+DRAWS = 999
+#: a block holds at least this many correlation times of the probes' noise: batch means of
+#: AR(1) noise then miss its long-run variance by about 2 rho / ((1 - rho^2) L) < 10 %
+BLOCK_CORRELATIONS = 5
 
 
 def sup_lm_distribution(p: int, trim: float = TRIM) -> np.ndarray:
@@ -103,11 +115,13 @@ class ParameterChange:
     statistic: float  #: sup-LM
     p_value: float  #: from the simulated null (at least 1 / paths)
     dof: int
-    t_break: float  #: model time of the supremum
+    t_break: float  #: model time of the break
     fraction: float  #: its place in the record (0..1)
     moved: dict[str, float]  #: effect -> its own sup-LM share at the break (largest first)
     alpha: float
     explained: bool  #: the record is otherwise explained (residual at the floor)
+    #: "blocks" (the information's own path, bootstrap) or "bridge" (the textbook form)
+    method: str = "blocks"
 
     @property
     def significant(self) -> bool:
@@ -122,7 +136,8 @@ class ParameterChange:
 
     def sentence(self, when: str = "") -> str:
         when = when or f"at {100 * self.fraction:.0f} % of the record"
-        p = f"p < {1 / _PATHS:g}" if self.p_value <= 1 / _PATHS else f"p = {self.p_value:.3g}"
+        least = 1 / (DRAWS + 1) if self.method == "blocks" else 1 / _PATHS
+        p = f"p <= {least:g}" if self.p_value <= least else f"p = {self.p_value:.3g}"
         top = ", ".join(f"{e} ({v:.0f})" for e, v in list(self.moved.items())[:3])
         if not self.significant:
             return f"no change of the rotor during the record (sup-LM {self.statistic:.1f}, {p})"
@@ -137,20 +152,44 @@ class ParameterChange:
     def to_dict(self) -> dict:
         return {"statistic": self.statistic, "p_value": self.p_value, "dof": self.dof, "t_break": self.t_break,
                 "fraction": self.fraction, "moved": self.moved, "significant": self.significant,
-                "changed": self.changed, "sentence": self.sentence()}
+                "changed": self.changed, "method": self.method, "sentence": self.sentence()}
+
+
+def _blocks(fit: OutputErrorFit, n: int) -> np.ndarray:
+    """The last sample of each block: whole shooting segments, together at least five noise
+    correlation times and at most MAX_BLOCKS blocks."""
+    ends = np.cumsum([i1 - i0 + 1 for i0, i1 in fit.grid.segments]) - 1
+    least = max(BLOCK_CORRELATIONS * fit.grid.noise_correlation, n / MAX_BLOCKS)
+    keep, last = [], -1
+    for e in ends:
+        if e - last >= least:
+            keep.append(e)
+            last = e
+    if keep and keep[-1] != ends[-1]:
+        keep[-1] = ends[-1]  # a short tail joins the last block
+    return np.asarray(keep, dtype=int)
 
 
 def parameter_constancy(fit: OutputErrorFit, *, alpha: float = 0.05, explained: bool = True,
                         trim: float = TRIM) -> ParameterChange:
     """The sup-LM test of ``fit``'s parameters being the same over the whole record;
     ``explained``: the record's residual is at the noise floor (module docstring)."""
-    t, sc, names = sample_scores(fit)
-    n, p = sc.shape
-    V = long_run_covariance(sc, andrews_bandwidth(sc)) / n
+    t, sc, J, names = sample_scores(fit, with_jacobian=True)
     # parameters without a score (held, or absent from the record) carry no test
-    keep = np.diag(V) > 1e-300 * max(float(np.max(np.diag(V))), 1e-300)
-    sc, V, names = sc[:, keep], V[np.ix_(keep, keep)], tuple(nm for nm, k in zip(names, keep, strict=True) if k)
-    p = sc.shape[1]
+    ss = np.sum(sc * sc, axis=0)
+    keep = ss > 1e-300 * max(float(np.max(ss)), 1e-300)
+    sc, J, names = sc[:, keep], J[:, :, keep], tuple(nm for nm, k in zip(names, keep, strict=True) if k)
+    n, p = sc.shape
+    owners = [nm.split(".", 1)[0].replace("output", "the probes' offsets and runout") for nm in names]
+    groups = {e: [i for i, o in enumerate(owners) if o == e] for e in dict.fromkeys(owners)}
+    ends = _blocks(fit, n)
+    if len(ends) >= max(20, MIN_BLOCKS_PER_PARAMETER * p):
+        test = sup_lm_test(sc, J, boundaries=ends, trim=trim, draws=DRAWS, seed=1993)
+        moved = {e: test.group_statistic(idx) for e, idx in groups.items()}
+        moved = dict(sorted(moved.items(), key=lambda kv: -kv[1]))
+        return ParameterChange(test.statistic, test.p_value, p, float(t[test.index]), test.fraction, moved,
+                               alpha, explained, "blocks")
+    V = long_run_covariance(sc, andrews_bandwidth(sc)) / n
     Vi = np.linalg.pinv(V)
     S = np.cumsum(sc, axis=0)
     ks = np.arange(max(1, int(math.ceil(trim * n))), int(math.floor((1 - trim) * n)))
@@ -160,11 +199,9 @@ def parameter_constancy(fit: OutputErrorFit, *, alpha: float = 0.05, explained: 
     k, lk = ks[j], lam[j]
     null = sup_lm_distribution(p, trim)
     pval = max((np.sum(null >= lm[j]) + 1) / (len(null) + 1), 1 / _PATHS)
-    moved: dict[str, float] = {}
-    owners = [nm.split(".", 1)[0].replace("output", "the probes' offsets and runout") for nm in names]
-    for e in dict.fromkeys(owners):
-        idx = [i for i, o in enumerate(owners) if o == e]
+    moved = {}
+    for e, idx in groups.items():
         Se = S[k, idx]
         moved[e] = float(Se @ np.linalg.pinv(V[np.ix_(idx, idx)]) @ Se / (n * lk * (1 - lk)))
     moved = dict(sorted(moved.items(), key=lambda kv: -kv[1]))
-    return ParameterChange(float(lm[j]), float(pval), p, float(t[k]), float(lk), moved, alpha, explained)
+    return ParameterChange(float(lm[j]), float(pval), p, float(t[k]), float(lk), moved, alpha, explained, "bridge")

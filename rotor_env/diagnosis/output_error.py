@@ -392,6 +392,9 @@ class ShootingGrid:
     probe_noise_std: float | None = None
     #: RK4 steps per grid sample (more where the response is many times the noise)
     substeps: int = 1
+    #: the noise's integrated correlation time on the grid, in grid samples (sum over every lag
+    #: of its autocorrelation: 1 for white, (1 + rho) / (1 - rho) for AR(1) at its own rate)
+    noise_correlation: float = 1.0
 
     @classmethod
     def from_arrays(cls, t, phi, phid, th_x, th_y, ip: float, *, noise_std: float | None = None,
@@ -446,6 +449,7 @@ class ShootingGrid:
             lags = np.abs(np.arange(-(len(taps) - 1), len(taps)))
             gain = float(np.sum(acf * float(noise_rho) ** lags))
         sigma = None if noise_std is None else float(noise_std) * math.sqrt(gain)
+        tau = _noise_correlation_time(taps, q, float(noise_rho))
         # RK4's phase error over a segment, omega T (omega dt)^4 / 120 relative at the top
         # speed's 1X, kept below a third of the noise-to-response ratio
         amp = float(np.max(np.hypot(y[:, 0], y[:, 1]))) if len(y) else 0.0
@@ -457,7 +461,7 @@ class ShootingGrid:
             while nsub < 8 and omega * segment_length * (omega * dt / nsub) ** 4 / 120.0 > want:
                 nsub += 1
         return cls(t, np.asarray(phi, float), np.asarray(phid, float), y, rates, seg, float(ip), sigma, q,
-                   None if noise_std is None else float(noise_std), nsub)
+                   None if noise_std is None else float(noise_std), nsub, tau)
 
     @property
     def n(self) -> int:
@@ -650,6 +654,26 @@ def _project(grid, r, jac, npq):
         rows_j.append(Js - Q @ (Q.T @ Js))
         bases.append((Jx, rs, Js))
     return np.concatenate(rows_r), np.vstack(rows_j), bases
+
+
+def _noise_correlation_time(taps: np.ndarray | None, q: int, rho: float) -> float:
+    """The integrated correlation time, in grid samples, of AR(1) noise (lag-one correlation
+    ``rho`` at the input rate) after the decimating FIR ``taps`` and keeping every ``q``-th
+    sample: ``sum_m r(m q)`` over every grid lag ``m``, ``r`` the filtered noise's
+    autocorrelation."""
+    if taps is None:
+        return (1.0 + rho) / (1.0 - rho)
+    acf = np.correlate(taps, taps, mode="full")
+    half = len(taps) - 1
+    if rho != 0.0:
+        # the filter's autocorrelation convolved with rho^|l|, over lags where rho^|l| matters
+        reach = int(min(50_000, math.ceil(math.log(1e-9) / math.log(min(abs(rho), 0.999999)))))
+        kern = rho ** np.abs(np.arange(-reach, reach + 1))
+        acf = np.convolve(acf, kern)
+        half += reach
+    lags = np.arange(-half, half + 1)
+    on_grid = lags % q == 0
+    return float(np.sum(acf[on_grid]) / acf[half])
 
 
 def fit_output_error(
@@ -937,20 +961,22 @@ def added_effect_information(fit: OutputErrorFit, effect: str,
     return AddedEffectInformation(effect, tuple(eff.coefficients), given, G0, G, cov, absorbed, score, Gi @ g)
 
 
-def sample_scores(fit: OutputErrorFit) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+def sample_scores(fit: OutputErrorFit, *, with_jacobian: bool = False):
     """The fit's scores per grid sample: ``J_k' e_k`` summed over the two channels, with ``J``
     the Jacobian of every free parameter (the model's, then the probes' offsets and runout)
     projected on the complement of each segment's start state, ``e`` the residual.  At the
     optimum they sum to zero; their partial sums are the path of a parameter-constancy test
     (:mod:`rotor_env.diagnosis.change`).  Returns the samples' times, the scores ``(N, p)``
-    and the parameters' names."""
+    and the parameters' names; ``with_jacobian``: also the projected Jacobian rows
+    ``(N, 2, p)`` (the test's information per sample), before the names."""
     names, _, _, npq, pred, jac = _jacobian_along(fit, fit.effects, fit.theta_full, fit.arg_full,
                                                   _held_arguments(fit))
     grid = fit.grid
     rt, Jt, _ = _project(grid, grid.y - pred, jac, npq)
-    scores = (Jt * rt[:, None]).reshape(-1, 2, npq).sum(axis=1)
+    J3 = Jt.reshape(-1, 2, npq)
+    scores = (J3 * rt.reshape(-1, 2)[:, :, None]).sum(axis=1)
     t = np.concatenate([grid.t[i0:i1 + 1] for i0, i1 in grid.segments])
-    return t, scores, names
+    return (t, scores, J3, names) if with_jacobian else (t, scores, names)
 
 
 def equation_error_start(grid: ShootingGrid, effects: Sequence[str]) -> dict[str, np.ndarray]:
