@@ -271,7 +271,7 @@ def crack_errors(fault: str, truth: dict, params: dict) -> dict:
     if fault == "breathing_crack" and "breathing_crack" in params:
         v = params["breathing_crack"]["values"]
         ax, ph = v.get("crack_axis", 0.0), v.get("breathing_phase", 0.0)
-        # the moment turns with phi - axis for the breathing but with 2 (phi - axis) for the
+        # the moment turns with phi + axis for the breathing but with 2 (phi + axis) for the
         # open part: (axis + pi, breathing_phase + pi) is the same crack, so the axis is
         # compared modulo pi, with the breathing phase moved along
         if abs(_angle_error_deg(ax, truth["crack_axis"], 2 * math.pi)) > 90.0:

@@ -75,11 +75,11 @@ class SupLMTest:
 
     statistic: float  #: sup_k LM_k
     p_value: float  #: from the bootstrap draws (at least 1 / (draws + 1))
-    dof: int  #: parameters tested
+    dof: int  #: parameters tested (their change; the others held)
     index: int  #: the break's estimate: the last sample of its block (the least-squares date)
     fraction: float  #: its place in the record (share of the samples, 0..1)
-    partial_sum: np.ndarray  #: S_k there (dof,)
-    covariance: np.ndarray  #: W_k there (dof, dof)
+    partial_sum: np.ndarray  #: S_k there, every parameter (p,)
+    covariance: np.ndarray  #: W_k there, every parameter (p, p)
     null: np.ndarray  #: the bootstrap's draws of the supremum under constant parameters (sorted)
 
     def group_statistic(self, idx) -> float:
@@ -104,13 +104,15 @@ def _inverse_root(W: np.ndarray) -> np.ndarray:
 
 
 def sup_lm_test(scores: np.ndarray, jacobian: np.ndarray, *, boundaries: np.ndarray | None = None,
-                trim: float = 0.15, draws: int = 499, seed: int = 0) -> SupLMTest:
+                tested=None, trim: float = 0.15, draws: int = 499, seed: int = 0) -> SupLMTest:
     """The sup-LM test of constant parameters (module docstring).
 
     ``scores``: ``(n, p)``, the per-sample scores ``J_i' e_i`` of a converged fit (they sum to
     about zero); ``jacobian``: ``(n, p)`` or ``(n, r, p)``, the Jacobian rows behind them;
     ``boundaries``: increasing sample indices where a block ends (default: blocks of Andrews'
-    Bartlett bandwidth of the scores, at least ``n / MAX_BLOCKS`` samples); ``trim``: the share
+    Bartlett bandwidth of the scores, at least ``n / MAX_BLOCKS`` samples); ``tested``: the
+    indices of the parameters whose change is tested (default: all; the others are estimated
+    but held the same on both sides: Andrews' partial structural change); ``trim``: the share
     of the record at each end where no break is looked for; ``seed``: the bootstrap's (the
     same answer every run)."""
     sc = np.asarray(scores, dtype=float)
@@ -131,10 +133,14 @@ def sup_lm_test(scores: np.ndarray, jacobian: np.ndarray, *, boundaries: np.ndar
             raise ValueError(f"boundaries must increase within [0, {n - 1}]")
     ends = ends.copy()
     ends[-1] = n  # what follows the last boundary joins the last block
+    idx = np.arange(p) if tested is None else np.asarray(tested, dtype=int)
+    if idx.ndim != 1 or len(idx) == 0 or np.any((idx < 0) | (idx >= p)) or len(set(idx.tolist())) != len(idx):
+        raise ValueError(f"tested must name distinct parameters among 0..{p - 1}")
+    q = len(idx)
     nb = len(ends)
-    if nb < max(20, MIN_BLOCKS_PER_PARAMETER * p):
-        raise ValueError(f"{n} samples in {nb} blocks: too few for a break test of {p} parameters "
-                         f"(at least {max(20, MIN_BLOCKS_PER_PARAMETER * p)})")
+    if nb < max(20, MIN_BLOCKS_PER_PARAMETER * q):
+        raise ValueError(f"{n} samples in {nb} blocks: too few for a break test of {q} parameters "
+                         f"(at least {max(20, MIN_BLOCKS_PER_PARAMETER * q)})")
     starts = np.concatenate([[0], ends[:-1]])
     b = np.add.reduceat(sc, starts, axis=0)
     Hb = np.stack([np.einsum("krp,krq->pq", J[i0:i1], J[i0:i1]) for i0, i1 in zip(starts, ends, strict=True)])
@@ -148,13 +154,15 @@ def sup_lm_test(scores: np.ndarray, jacobian: np.ndarray, *, boundaries: np.ndar
     A = H[sel] @ Hi
     Ok = Ob[sel]
     W = Ok - A @ Ok - np.swapaxes(A @ Ok, 1, 2) + A @ Ob[-1] @ np.swapaxes(A, 1, 2)
-    R = _inverse_root(W)
+    Wt = W[:, idx][:, :, idx]
+    R = _inverse_root(Wt)
     S = np.cumsum(b, axis=0)
-    lm = np.sum((S[sel][:, None, :] @ R)[:, 0, :] ** 2, axis=1)
+    lm = np.sum((S[sel][:, idx][:, None, :] @ R)[:, 0, :] ** 2, axis=1)
     # the break's place: the least-squares date (Bai 1997), where splitting every parameter
     # lowers the sum of squares most -- not the argmax of LM, which its weighting pulls towards
     # where the information is
-    dssr = np.sum((S[sel][:, None, :] @ _inverse_root(H[sel] - A @ H[sel]))[:, 0, :] ** 2, axis=1)
+    G = (H[sel] - A @ H[sel])[:, idx][:, :, idx]
+    dssr = np.sum((S[sel][:, idx][:, None, :] @ _inverse_root(G))[:, 0, :] ** 2, axis=1)
     j = int(np.argmax(dssr))
     rng = np.random.default_rng(seed)
     sup = np.empty(draws)
@@ -162,10 +170,10 @@ def sup_lm_test(scores: np.ndarray, jacobian: np.ndarray, *, boundaries: np.ndar
     for c0 in range(0, draws, chunk):
         eta = rng.standard_normal((nb, min(chunk, draws - c0), 1))
         U = np.cumsum(eta * b[:, None, :], axis=0)  # (block, draw, p)
-        Ss = U[sel] - np.swapaxes(A @ U[-1].T, 1, 2)
+        Ss = (U[sel] - np.swapaxes(A @ U[-1].T, 1, 2))[:, :, idx]
         sup[c0:c0 + eta.shape[1]] = np.max(np.sum((Ss @ R) ** 2, axis=2), axis=0)
     stat = float(np.max(lm))
     pval = (np.sum(sup >= stat) + 1) / (draws + 1)
     k = sel[j]
-    return SupLMTest(stat, float(pval), p, int(ends[k] - 1), float(lam[k]), S[k].copy(),
+    return SupLMTest(stat, float(pval), q, int(ends[k] - 1), float(lam[k]), S[k].copy(),
                      0.5 * (W[j] + W[j].T), np.sort(sup))

@@ -261,9 +261,10 @@ def _viscous(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
 def _asymmetry(phi, phid, phidd, th_x, th_y, w_x, w_y, ip, axis=0.0):
     # double-angle from sin/cos(phi): once inlined in the simulator, the compiler shares
     # them with the unbalance's (two trigonometric calls per evaluation instead of four).
-    # ``axis``: the stiff body axis u at the shaft angle ``axis`` from the keyphasor notch:
-    # the whole pattern turns with phi - axis
-    s, c = np.sin(phi - axis), np.cos(phi - axis)
+    # ``axis``: the stiff body axis u at the shaft angle ``axis`` from the keyphasor notch,
+    # ahead in the direction of rotation: in the fixed frame it points along phi + axis, and
+    # a stiffness k + D along a direction at angle a is the moment -D e^{2 i a} conj(z)
+    s, c = np.sin(phi + axis), np.cos(phi + axis)
     s2, c2 = 2.0 * s * c, c * c - s * s
     return (-(th_y * c2 + th_x * s2),), (-(th_y * s2 - th_x * c2),)
 
@@ -326,9 +327,9 @@ def _misalignment(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
 
 
 def _breathing_crack(phi, phid, phidd, th_x, th_y, w_x, w_y, ip, axis=0.0):
-    # ``axis``: the crack's direction on the shaft from the keyphasor notch (the whole
-    # pattern turns with phi - axis)
-    s, c = np.sin(phi - axis), np.cos(phi - axis)
+    # ``axis``: the crack's direction on the shaft from the keyphasor notch, ahead in the
+    # direction of rotation (in the fixed frame along phi + axis: the whole pattern turns with it)
+    s, c = np.sin(phi + axis), np.cos(phi + axis)
     s2, c2 = 2.0 * s * c, c * c - s * s
     # G = z + conj(z) e^{2 i phi} = 2 xi e^{i phi}, xi the deflection across the crack
     g_y = th_y + th_y * c2 + th_x * s2
@@ -575,7 +576,7 @@ register_effect(
         columns=_asymmetry,
         to_coefficients=_to,
         from_coefficients=_from,
-        moment="-D e^{2 i (phi - axis)} conj(z)  (axis 0: -D (th_y cos2phi + th_x sin2phi),  -D (th_y sin2phi - th_x cos2phi))",
+        moment="-D e^{2 i (phi + axis)} conj(z)  (axis 0: -D (th_y cos2phi + th_x sin2phi),  -D (th_y sin2phi - th_x cos2phi))",
         cause="unsymmetrical shaft stiffness: a breathing or open crack, a keyway, a flat",
         signature="splits the critical speed into sqrt(k-D)..sqrt(k+D), unstable in between; "
         "a whirl at frequency w leaves order 2 - w/speed (a static side load: 2x, the crack's classic "
@@ -824,7 +825,8 @@ register_effect(
         columns=_breathing_crack,
         to_coefficients=_breathing_to,
         from_coefficients=_breathing_from,
-        moment="(dk/4) (1 + depth cos(phi + alpha)) (z + conj(z) e^{2 i phi})  (Mayes' cosine breathing)",
+        moment="(dk/4) (1 + depth cos(phi + axis + alpha)) (z + conj(z) e^{2 i (phi + axis)})  (Mayes' cosine "
+        "breathing; axis 0 in the paper)",
         cause="a fatigue crack that opens and closes once per turn as the bending across it (gravity, a "
         "side load) changes sign",
         signature="with a side load: 1x, 2x and 3x; resonances at 1/2 and 1/3 of the critical (sub-critical "

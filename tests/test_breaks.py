@@ -72,6 +72,20 @@ def test_a_break_at_the_resonance_is_found_at_its_place():
     assert res.group_statistic([0, 1]) > 5 * res.group_statistic([2, 3])
 
 
+def test_a_partial_change_is_tested_on_its_own_parameters():
+    """The same break tested on the 1X pair alone (the offset and trend held the same on both
+    sides, Andrews' partial structural change): significant with 2 degrees of freedom, dated
+    alike; tested on the offset and trend alone: no change."""
+    rng = np.random.default_rng(6)
+    t, X = _resonant_regressors()
+    theta = np.where(t[:, None] < 0.45, [1.0, 0.5, 0.2, 0.1], [1.05, 0.5, 0.2, 0.1])
+    y = np.sum(X * theta, axis=1) + 0.2 * rng.standard_normal(N)
+    pair = _test(X, y, draws=499, tested=[0, 1])
+    assert pair.dof == 2 and pair.p_value < 0.01
+    assert pair.fraction == pytest.approx(0.45, abs=0.02)
+    assert _test(X, y, draws=499, tested=[2, 3]).p_value > 0.05
+
+
 def test_bad_shapes_and_short_records_are_clear_errors():
     X = np.ones((100, 2))
     with pytest.raises(ValueError, match="do not match"):
@@ -80,6 +94,8 @@ def test_bad_shapes_and_short_records_are_clear_errors():
         sup_lm_test(X[:30], X[:30], boundaries=np.arange(3, 30, 4))
     with pytest.raises(ValueError, match="too few"):  # 20 blocks, but 8 per parameter wanted
         sup_lm_test(np.ones((100, 3)), np.ones((100, 3)), boundaries=np.arange(4, 100, 5))
+    with pytest.raises(ValueError, match="tested"):
+        sup_lm_test(X, X, tested=[0, 0])
     with pytest.raises(ValueError, match="increase"):
         sup_lm_test(X, X, boundaries=np.array([5, 3, 50]))
     with pytest.raises(ValueError, match="trim"):

@@ -100,10 +100,11 @@ def test_rig_crack_appearing_above_the_critical_is_a_change_in_seconds_and_rpm(t
 
     out = diagnose_rig(_rig_record(tmp_path, 2400.0)).to_dict()
     assert out["change"]["changed"], out["change"]
-    assert out["change"]["method"] == "blocks"  # a rig record: the information's own path
     assert "not the same over the record, most at" in out["change"]["sentence"]
     assert out["change"]["t_s"] == pytest.approx(7.0, abs=0.4)
     assert out["change"]["rpm"] == pytest.approx(2400.0, abs=120.0)
+    # one model explains the record: it is not diagnosed apart (module docstring of .parts)
+    assert out["parts"] is None
     (tmp_path / "healthy").mkdir()
     healthy = diagnose_rig(_rig_record(tmp_path / "healthy", None, seed=4)).to_dict()
     assert healthy["verdict"] == "explained" and not healthy["change"]["significant"], healthy["change"]
@@ -124,3 +125,29 @@ def test_the_null_is_simulated_once_and_read_back(tmp_path, monkeypatch):
     files[0].write_bytes(b"not an array")
     monkeypatch.setattr(change, "_NULL", {})
     assert np.array_equal(change.sup_lm_distribution(3), first)
+
+
+def test_a_crack_opening_below_the_critical_is_named_after_its_time(tmp_path):
+    """A crack D = 0.03 (stiff axis 30 deg from the notch) opening at 1200 rpm (3.0 s), below the
+    critical: one model for the record cannot hold it (the whole record's constant crack is
+    not even significant); the change test dates a break, each side is diagnosed on its own,
+    and the break is dated again by refits of the sides' joint model: before it, nothing;
+    after it, the asymmetry with its size and axis; the record's verdict says so."""
+    from rotor_env.diagnosis.from_rig import diagnose_rig
+
+    out = diagnose_rig(_rig_record(tmp_path, 1200.0)).to_dict()
+    parts = out["parts"]
+    assert parts is not None and parts["changed"], out["change"]
+    assert parts["appeared"] == ["asymmetry"] and not parts["gone"]
+    assert parts["t_s"] == pytest.approx(3.0, abs=0.15)
+    assert parts["before"]["verdict"] == "explained" and parts["before"]["missing"] == []
+    assert parts["after"]["verdict"] == "explained_after_adding"
+    crack = parts["after"]["parameters"]["asymmetry"]["values"]
+    D, axis = crack["D"], crack["D_axis"]
+    if D < 0:  # the same crack seen from its other axis
+        D, axis = -D, axis + np.pi / 2
+    assert D == pytest.approx(0.03, rel=0.05)
+    assert abs((np.degrees(axis) - 30.0 + 90.0) % 180.0 - 90.0) <= 5.0
+    assert out["verdict"] == "explained_after_adding" and "asymmetry" in out["missing"]
+    assert out["change"]["sentence"].startswith("the rotor changed at 3.")
+    assert "asymmetry appeared" in out["change"]["sentence"]

@@ -87,8 +87,11 @@ class RigDiagnosis(Result):
         })
         if isinstance(self.diagnosis, OutputErrorDiagnosis):
             byvec = self.named_by_vectors
+            change = self.change_when
             d.update({"verdict": self.verdict, "missing": self.missing, "named_by_vectors": byvec,
-                      "undecidable": self.undecidable, "change": self.change_when})
+                      "undecidable": self.undecidable, "change": change})
+            if change is not None and "parts" in change:
+                d["parts"] = change.pop("parts")  # with the break in the file's seconds
             d["notes"] += [f"{e}: named by the 1X vectors; the waveforms' fit is at its floor without it (its "
                            "response there is absorbed by the runout term, the unbalance and the segments' start "
                            "states): they neither confirm nor refute it" for e in byvec]
@@ -156,6 +159,8 @@ class RigDiagnosis(Result):
         d = self.diagnosis
         if not isinstance(d, OutputErrorDiagnosis) or d.rms_ratio_after > EXPLAINED_RATIO or d.added:
             return []
+        if self.changed_parts is not None:
+            return []  # two rotors in one record: the vectors' one model reads neither
         lib = library_effects()
         return [e for e in self.vectors.missing if e in lib and e not in d.missing]
 
@@ -174,6 +179,14 @@ class RigDiagnosis(Result):
         rpm = float(np.interp(t_s, rec.t, rec.rpm))
         out = change.to_dict()
         out.update(t_s=t_s, rpm=rpm, sentence=change.sentence(f"at {t_s:.2f} s ({rpm:.0f} rpm)"))
+        parts = getattr(d, "parts", None)
+        if parts is not None:
+            t_p = float(t_s - change.t_break / self.w_ref + parts.t_break / self.w_ref)
+            when = f"at {t_p:.2f} s ({float(np.interp(t_p, rec.t, rec.rpm)):.0f} rpm)"
+            out["parts"] = {**parts.to_dict(), "t_s": t_p, "sentence": parts.sentence(when)}
+            if parts.changed:
+                # the two sides tell what the drift was: the sentence says so, not "a trace"
+                out["sentence"] = parts.sentence(when)
         return out
 
     @property
@@ -191,13 +204,27 @@ class RigDiagnosis(Result):
         return out
 
     @property
+    def changed_parts(self):
+        """The waveforms' two sides of a break where they tell two rotors apart (:mod:`.parts`),
+        else ``None``."""
+        parts = getattr(self.diagnosis, "parts", None)
+        return parts if parts is not None and parts.changed else None
+
+    @property
     def missing(self) -> list[str]:
-        """The record's missing effects: the waveforms', then those only the 1X vectors decide."""
-        return [*self.diagnosis.missing, *self.named_by_vectors]
+        """The record's missing effects: the waveforms', what appeared after a change of the
+        rotor, then those only the 1X vectors decide."""
+        parts = self.changed_parts
+        appeared = [e for e in parts.appeared if e not in self.diagnosis.missing] if parts is not None else []
+        return [*self.diagnosis.missing, *appeared, *self.named_by_vectors]
 
     @property
     def verdict(self) -> str:
         v = self.diagnosis.verdict
+        parts = self.changed_parts
+        if parts is not None and parts.explained and v in ("partly_explained", "unexplained"):
+            # one model per side explains what one model for the record could not
+            return "explained_after_adding"
         return "explained_after_adding" if v == "explained" and self.named_by_vectors else v
 
 

@@ -106,13 +106,16 @@ GRID_PER_TURN = 24
 #: output terms fitted with every model (nuisance parameters, in the reading, not in the
 #: rotor: no dynamics): the probes' static offsets (the gap removed by the mean leaves one);
 #: a probe track's runout, a pattern fixed to the shaft angle -- its 1X (an eccentric track
-#: seen by two orthogonal probes: a forward circle, two terms) and its 2X (an oval track:
-#: each probe sees it at twice its own angle, so any 2X pattern of the two axes, four
-#: terms).  Subtracting the slow-roll revolutions instead would take a cracked shaft's own
+#: seen by two orthogonal probes on one track is a forward circle; probes on tracks a little
+#: apart, or a scratch under one of them, give each its own 1X, as a field engineer's
+#: per-probe slow-roll vectors have: any 1X pattern of the two axes, forward and backward,
+#: four terms) and its 2X (an oval track: each probe sees it at twice its own angle, so any
+#: 2X pattern of the two axes, four terms).  Subtracting the slow-roll revolutions instead would take a cracked shaft's own
 #: slow-roll 1X and 2X under its static load with it; fitted with the model, only what is
 #: the same at every speed is taken, and the crack's 2X resonance at half the critical stays.
 OUTPUT_TERMS = ("offset_x", "offset_y", "runout_cos", "runout_sin",
-                "runout2_x_cos", "runout2_x_sin", "runout2_y_cos", "runout2_y_sin")
+                "runout2_x_cos", "runout2_x_sin", "runout2_y_cos", "runout2_y_sin",
+                "runout_back_cos", "runout_back_sin")
 N_OFFSETS = len(OUTPUT_TERMS)
 #: forward-difference step for A = df/dx (relative to 1 + |x|) and for the arguments
 _FD_STATE = 1e-7
@@ -581,12 +584,15 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset):
     for i0, i1 in grid.segments:
         inside[i0:i1 + 1] = True
     # the output's nuisance terms (OUTPUT_TERMS): static offsets (x, y); a probe track's 1X
-    # runout R e^{i phi} in z = th_y + i th_x; its 2X, any pattern of 2 phi on each axis
+    # runout R e^{i phi} + R_b e^{-i phi} in z = th_y + i th_x (any 1X pattern on each axis);
+    # its 2X, any pattern of 2 phi on each axis
     phi = grid.phi[inside]
     s, c = np.sin(phi), np.cos(phi)
     s2, c2 = np.sin(2 * phi), np.cos(2 * phi)
-    pred[inside, 0] += offset[0] + offset[2] * s + offset[3] * c + offset[4] * c2 + offset[5] * s2
-    pred[inside, 1] += offset[1] + offset[2] * c - offset[3] * s + offset[6] * c2 + offset[7] * s2
+    pred[inside, 0] += (offset[0] + offset[2] * s + offset[3] * c + offset[4] * c2 + offset[5] * s2
+                        - offset[8] * s + offset[9] * c)
+    pred[inside, 1] += (offset[1] + offset[2] * c - offset[3] * s + offset[6] * c2 + offset[7] * s2
+                        + offset[8] * c + offset[9] * s)
     jac[inside, 0, npar] = 1.0
     jac[inside, 1, npar + 1] = 1.0
     jac[inside, 0, npar + 2] = s
@@ -597,6 +603,10 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset):
     jac[inside, 0, npar + 5] = s2
     jac[inside, 1, npar + 6] = c2
     jac[inside, 1, npar + 7] = s2
+    jac[inside, 0, npar + 8] = -s
+    jac[inside, 1, npar + 8] = c
+    jac[inside, 0, npar + 9] = c
+    jac[inside, 1, npar + 9] = s
     return status, pred, jac
 
 

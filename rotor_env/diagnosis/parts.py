@@ -1,0 +1,224 @@
+"""The record in two parts: where the parameters changed, each side diagnosed on its own.
+
+One model for the whole record cannot hold a rotor that changed during it.  When that model
+does not explain the record and the parameter-constancy test (:mod:`.change`) finds its
+parameters not the same over it, the record is cut at the break it dates -- between two shooting segments, leaving
+out the segment either side of the cut (the break is dated to a block), so that each side is
+an ordinary record of its own -- and each side goes through the same
+output-error diagnosis (same starting model, same candidates, same checks, the same noise
+floor).  What the two sides name differently is what appeared (or went); a parameter both
+sides fit whose 95 % intervals do not overlap is what moved.
+
+Two readings follow:
+
+- **the rotor changed**: both sides are explained on their own, with parameters moved beyond
+  their intervals, or a side names what the other lacks (a crack that opened: ``asymmetry`` after the
+  break, nothing before);
+- **the drift is not a change**: each side needs what the whole needed, and nothing moved
+  beyond its intervals -- a parameter that depends on speed (a cross-coupling reads as a
+  damping ``c - q/w``) or the instrument's drift, which no cut removes.
+
+What it does not do: split a record that one model explains.  There the change test's drift
+may be an instrument's (a keyphasor sampled at 2.5 kHz puts milliradians of error into the
+spin angle at top speed), and each side would name what its own small misfit makes of it
+(a rig test's breathing crack got a support anisotropy "appeared" so); the drift is reported
+and the record stays one rotor.  A crack that opens above the critical changes the small
+response there by a fraction of a micrometre and leaves the record explained: its change is
+dated, not named.  Each side holds fewer samples than the record, so its detectability is
+lower.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .change import ParameterChange
+    from .output_error import OutputErrorFit, ShootingGrid
+
+
+class SideDiagnosis(Protocol):
+    """What a side's diagnosis offers (an :class:`~.oe_diagnosis.SideDiagnosis`; named
+    by what it does, so that this module need not import the diagnosis that calls it)."""
+
+    verdict: str
+    added: list[str]
+    model_after: tuple[str, ...]
+    after: OutputErrorFit
+    change: ParameterChange | None
+
+    @property
+    def rms_ratio_after(self) -> float: ...
+
+    def parameters(self) -> dict: ...
+
+    def to_dict(self) -> dict: ...
+
+__all__ = ["MIN_PART_SEGMENTS", "RecordParts", "split_at_change"]
+
+#: each side needs at least this many shooting segments to be diagnosed on its own
+MIN_PART_SEGMENTS = 8
+#: Levenberg-Marquardt steps of each refit that dates the break (:func:`_refit_date`)
+REFIT_ITERATIONS = 10
+_EXPLAINED = ("explained", "explained_after_adding")
+
+
+@dataclass(frozen=True)
+class RecordParts:
+    """The record cut at its change, each side diagnosed on its own (module docstring)."""
+
+    t_break: float  #: model time of the cut (the end of the last segment before it)
+    before: SideDiagnosis
+    after: SideDiagnosis
+
+    @property
+    def explained(self) -> bool:
+        """Each side explained by its own model."""
+        return self.before.verdict in _EXPLAINED and self.after.verdict in _EXPLAINED
+
+    @property
+    def appeared(self) -> list[str]:
+        """Effects named after the break and not before."""
+        return [e for e in self.after.added if e not in self.before.model_after]
+
+    @property
+    def gone(self) -> list[str]:
+        """Effects named before the break and not after."""
+        return [e for e in self.before.added if e not in self.after.model_after]
+
+    def moved(self) -> dict[str, dict[str, tuple[float, float]]]:
+        """Parameters both sides fit whose 95 % intervals do not overlap: effect -> name ->
+        (before, after)."""
+        pb, pa = self.before.parameters(), self.after.parameters()
+        out: dict[str, dict[str, tuple[float, float]]] = {}
+        for e in pb:
+            if e not in pa:
+                continue
+            for name, vb in pb[e]["values"].items():
+                va = pa[e]["values"].get(name)
+                hb, ha = pb[e]["ci95"].get(name, math.nan), pa[e]["ci95"].get(name, math.nan)
+                if va is None or not (math.isfinite(hb) and math.isfinite(ha)):
+                    continue
+                gap = abs(va - vb)
+                if name.endswith(("axis", "phase")) or name == "beta":
+                    gap = abs((va - vb + math.pi) % (2 * math.pi) - math.pi)
+                if gap > hb + ha:
+                    out.setdefault(e, {})[name] = (float(vb), float(va))
+        return out
+
+    @property
+    def changed(self) -> bool:
+        """The two sides are two rotors: something appeared or went, or each side is explained
+        on its own (the whole record was not: :func:`split_at_change` is asked only then) with
+        parameters moved."""
+        return bool(self.appeared or self.gone or (self.explained and self.moved()))
+
+    def sentence(self, when: str = "") -> str:
+        when = when or "at the break"
+        sides = (f"diagnosed apart {when}: before, {self.before.verdict} ({self.before.rms_ratio_after:.3g}x the "
+                 f"floor{', named ' + ', '.join(self.before.added) if self.before.added else ''}); after, "
+                 f"{self.after.verdict} ({self.after.rms_ratio_after:.3g}x"
+                 f"{', named ' + ', '.join(self.after.added) if self.after.added else ''})")
+        moved = self.moved()
+        what = "; ".join(f"{e} {name} {v0:.4g} -> {v1:.4g}" for e, d in moved.items() for name, (v0, v1) in d.items())
+        if self.appeared or self.gone:
+            head = "the rotor changed " + when + ": " + ", ".join(
+                [f"{e} appeared" for e in self.appeared] + [f"{e} went" for e in self.gone])
+        elif self.changed:
+            head = f"the rotor changed {when}: no effect named differently, but the parameters moved"
+        else:
+            head = (f"no change of the rotor {when} that the two sides tell: each side needs what the whole "
+                    "record needed (a parameter that depends on speed, or the instrument's drift, is no change)")
+        return f"{head} -- {sides}" + (f"; moved beyond their 95 % intervals: {what}" if what else "")
+
+    def to_dict(self) -> dict:
+        keys = ("verdict", "missing", "rms_ratio_after", "parameters", "rejected", "undecidable")
+        b, a = self.before.to_dict(), self.after.to_dict()
+        return {"t_break": self.t_break, "changed": self.changed, "appeared": self.appeared, "gone": self.gone,
+                "explained": self.explained,
+                "moved": {e: {k: list(v) for k, v in d.items()} for e, d in self.moved().items()},
+                "before": {k: b[k] for k in keys}, "after": {k: a[k] for k in keys}, "sentence": self.sentence()}
+
+
+def _refit_date(grid: ShootingGrid, whole: OutputErrorFit, sides: RecordParts) -> float | None:
+    """The least-squares date of the break, by refits: the sides' joint model (every effect
+    either side named, at the sides' values) fitted on each side of every candidate cut, the
+    cut where the two sums of squares together are least (a coarse grid over the middle of
+    the record, then finer around its best).  ``None`` where no cut could be fitted."""
+    from ..effects import EFFECTS
+    from .output_error import fit_output_error, start_from
+
+    fits = (sides.after.after, sides.before.after)
+    effects = tuple(dict.fromkeys(e for f in fits for e in f.effects))
+    start = {e: v for f in reversed(fits) for e, v in start_from(f).items()}
+    args = {}
+    for f in reversed(fits):
+        for e in f.effects:
+            if EFFECTS[e].argument_parameters:
+                args[e] = {p.name: f.value(f"{e}.{p.name}") for p in EFFECTS[e].argument_parameters}
+    S = len(grid.segments)
+    lo, hi = max(MIN_PART_SEGMENTS, int(0.15 * S)), min(S - MIN_PART_SEGMENTS, int(0.85 * S))
+    cost: dict[int, float] = {}
+
+    def rss(n_first: int) -> float:
+        if n_first not in cost:
+            total = 0.0
+            for idx in (np.arange(0, n_first), np.arange(n_first, S)):
+                try:
+                    f = fit_output_error(replace(grid, segments=grid.segments[idx]), effects, start, x0=whole.x0[idx],
+                                         fixed_args=args, max_iter=REFIT_ITERATIONS)
+                except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+                    total = math.inf
+                    break
+                total += f.rss
+            cost[n_first] = total
+        return cost[n_first]
+
+    if hi <= lo:
+        return None
+    step = max(1, (hi - lo) // 12)
+    best = min(range(lo, hi + 1, step), key=rss)
+    while step > 1:
+        span, step = step, max(1, step // 4)
+        best = min(range(max(lo, best - span), min(hi, best + span) + 1, step), key=rss)
+    if not math.isfinite(cost[best]):
+        return None
+    return float(grid.t[grid.segments[best - 1, 1]])
+
+
+def split_at_change(grid: ShootingGrid, change: ParameterChange, whole: OutputErrorFit,
+                    diagnose: Callable[[ShootingGrid], SideDiagnosis]) -> RecordParts | None:
+    """Cut ``grid`` between the shooting segments at ``change``'s break and ``diagnose`` each
+    side; ``None`` where a side would hold fewer than :data:`MIN_PART_SEGMENTS` segments.
+
+    The change test dates the break by its linearisation at the whole record's fit, which a
+    model far from the data (no crack, or one constant crack, fitted to a record where a crack
+    opened) misplaces -- towards the critical, where the information is.  Where the sides name
+    different effects, or one of them is not explained, the break is dated again by refits of
+    their joint model (:func:`_refit_date`, Bai's least-squares date itself) and the record
+    is cut there."""
+    ends = grid.t[grid.segments[:, 1]]
+
+    def cut(t_break: float) -> RecordParts | None:
+        n_first = int(np.sum(ends <= t_break))
+        # the break is dated to a block (whole segments): the segment either side of the cut may
+        # hold it, and one segment of a changed rotor lifts its side's residual -- both left out
+        seg_before, seg_after = grid.segments[:max(n_first - 1, 0)], grid.segments[n_first + 1:]
+        if n_first < 1 or min(len(seg_before), len(seg_after)) < MIN_PART_SEGMENTS:
+            return None
+        return RecordParts(float(ends[n_first - 1]), diagnose(replace(grid, segments=seg_before)),
+                           diagnose(replace(grid, segments=seg_after)))
+
+    parts = cut(change.t_break)
+    if parts is None:
+        return None
+    if set(parts.before.model_after) != set(parts.after.model_after) or not parts.explained:
+        t_new = _refit_date(grid, whole, parts)
+        if t_new is not None and int(np.sum(ends <= t_new)) != int(np.sum(ends <= parts.t_break)):
+            parts = cut(t_new) or parts
+    return parts
