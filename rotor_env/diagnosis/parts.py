@@ -11,12 +11,13 @@ sides fit whose 95 % intervals do not overlap is what moved.
 
 Two readings follow:
 
-- **the rotor changed**: both sides are explained on their own, with parameters moved beyond
-  their intervals, or a side names what the other lacks (a crack that opened: ``asymmetry`` after the
+- **the rotor changed**: both sides are explained on their own, and a side names what the
+  other lacks or parameters moved beyond their intervals (a crack that opened: ``asymmetry`` after the
   break, nothing before);
 - **the drift is not a change**: each side needs what the whole needed, and nothing moved
   beyond its intervals -- a parameter that depends on speed (a cross-coupling reads as a
-  damping ``c - q/w``) or the instrument's drift, which no cut removes.
+  damping ``c - q/w``) or the instrument's drift, which no cut removes; or the sides are not
+  both explained either, and the model misses something all through (whatever they name).
 
 What it does not do: split a record that one model explains.  There the change test's drift
 may be an instrument's (a keyphasor sampled at 2.5 kHz puts milliradians of error into the
@@ -113,10 +114,12 @@ class RecordParts:
 
     @property
     def changed(self) -> bool:
-        """The two sides are two rotors: something appeared or went, or each side is explained
-        on its own (the whole record was not: :func:`split_at_change` is asked only then) with
-        parameters moved."""
-        return bool(self.appeared or self.gone or (self.explained and self.moved()))
+        """The two sides are two rotors: each is explained on its own (the whole record was not:
+        :func:`split_at_change` is asked only then), and something appeared, went or moved.
+        Sides that are not both explained show no change: the model misses something on both
+        (a record from another code, a crack under a sag eight times its response: the sides
+        named different things, each side's fit far off)."""
+        return bool(self.explained and (self.appeared or self.gone or self.moved()))
 
     def sentence(self, when: str = "") -> str:
         when = when or "at the break"
@@ -126,7 +129,10 @@ class RecordParts:
                  f"{', named ' + ', '.join(self.after.added) if self.after.added else ''})")
         moved = self.moved()
         what = "; ".join(f"{e} {name} {v0:.4g} -> {v1:.4g}" for e, d in moved.items() for name, (v0, v1) in d.items())
-        if self.appeared or self.gone:
+        if not self.explained:
+            head = (f"no change of the rotor {when} that the two sides show: they are not both explained either, "
+                    "so the model misses something all through")
+        elif self.appeared or self.gone:
             head = "the rotor changed " + when + ": " + ", ".join(
                 [f"{e} appeared" for e in self.appeared] + [f"{e} went" for e in self.gone])
         elif self.changed:
