@@ -188,29 +188,25 @@ def parameter_constancy(fit: OutputErrorFit, *, alpha: float = 0.05, explained: 
     # every parameter is tested, the probes' offsets and runout too: a crack that opens on a
     # synchronous orbit moves the 1X, and the output's 1X terms take much of that move (a
     # synthetic crack appearing past the critical went unseen with them held)
-    tested = list(range(p))
-    q = p
     ends = _blocks(fit, n)
-    if method == "blocks" or (method == "auto" and len(ends) >= max(20, MIN_BLOCKS_PER_PARAMETER * q)):
-        test = sup_lm_test(sc, J, boundaries=ends, tested=tested, trim=trim, draws=DRAWS, seed=1993)
+    if method == "blocks" or (method == "auto" and len(ends) >= max(20, MIN_BLOCKS_PER_PARAMETER * p)):
+        test = sup_lm_test(sc, J, boundaries=ends, trim=trim, draws=DRAWS, seed=1993)
         moved = {e: test.group_statistic(idx) for e, idx in groups.items()}
         moved = dict(sorted(moved.items(), key=lambda kv: -kv[1]))
-        return ParameterChange(test.statistic, test.p_value, q, float(t[test.index]), test.fraction, moved,
+        return ParameterChange(test.statistic, test.p_value, p, float(t[test.index]), test.fraction, moved,
                                alpha, explained, "blocks")
     V = long_run_covariance(sc, andrews_bandwidth(sc)) / n
     S = np.cumsum(sc, axis=0)
     ks = np.arange(max(1, int(math.ceil(trim * n))), int(math.floor((1 - trim) * n)))
     lam = ks / n
-    St = S[:, tested]
-    Vt = np.linalg.pinv(V[np.ix_(tested, tested)])
-    lm = np.einsum("ki,ij,kj->k", St[ks], Vt, St[ks]) / (n * lam * (1 - lam))
+    lm = np.einsum("ki,ij,kj->k", S[ks], np.linalg.pinv(V), S[ks]) / (n * lam * (1 - lam))
     j = int(np.argmax(lm))
     k, lk = ks[j], lam[j]
-    null = sup_lm_distribution(q, trim)
+    null = sup_lm_distribution(p, trim)
     pval = max((np.sum(null >= lm[j]) + 1) / (len(null) + 1), 1 / _PATHS)
     moved = {}
     for e, idx in groups.items():
         Se = S[k, idx]
         moved[e] = float(Se @ np.linalg.pinv(V[np.ix_(idx, idx)]) @ Se / (n * lk * (1 - lk)))
     moved = dict(sorted(moved.items(), key=lambda kv: -kv[1]))
-    return ParameterChange(float(lm[j]), float(pval), q, float(t[k]), float(lk), moved, alpha, explained, "bridge")
+    return ParameterChange(float(lm[j]), float(pval), p, float(t[k]), float(lk), moved, alpha, explained, "bridge")
