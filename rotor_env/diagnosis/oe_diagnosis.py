@@ -52,6 +52,7 @@ from .detectability import Detectability, assess_all
 from .output_error import (
     OutputErrorFit,
     ShootingGrid,
+    arguments_of,
     equation_error_start,
     fit_output_error,
     library_effects,
@@ -483,10 +484,8 @@ def _crack_split(grid: ShootingGrid, fit: OutputErrorFit, effect: str) -> str:
         part = np.sort(part)
         sub = replace(grid, segments=grid.segments[part])
         start = start_from(fit)
-        args = {e: {p.name: fit.value(f"{e}.{p.name}") for p in EFFECTS[e].argument_parameters}
-                for e in fit.effects if EFFECTS[e].argument_parameters}
         try:
-            f = fit_output_error(sub, fit.effects, start, x0=fit.x0[part], fixed_args=args, max_iter=15)
+            f = fit_output_error(sub, fit.effects, start, x0=fit.x0[part], fixed_args=arguments_of(fit), max_iter=15)
         except (FloatingPointError, np.linalg.LinAlgError, ValueError):
             return ""
         i = f.names.index(coef_name)

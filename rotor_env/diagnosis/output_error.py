@@ -84,6 +84,7 @@ __all__ = [
     "OutputErrorFit",
     "ShootingGrid",
     "added_effect_information",
+    "arguments_of",
     "coefficient_slice",
     "equation_error_start",
     "fit_output_error",
@@ -370,6 +371,19 @@ def coefficient_slice(effect: str) -> slice:
 def start_from(fit: OutputErrorFit) -> dict[str, np.ndarray]:
     """A fit's coefficients as the start of another fit (``start`` of :func:`fit_output_error`)."""
     return {e: fit.theta_full[coefficient_slice(e)].copy() for e in fit.effects}
+
+
+def arguments_of(*fits: OutputErrorFit) -> dict[str, dict[str, float]]:
+    """The argument parameters (a rub's clearance, a crack's breathing) of the fits' effects at
+    their fitted values, to hold in a refit (``fixed_args`` of :func:`fit_output_error`): a
+    refit on part of the record then moves the coefficients only, whose sensitivities are
+    linear.  An effect in several fits takes the first fit's values."""
+    args: dict[str, dict[str, float]] = {}
+    for fit in reversed(fits):
+        for e in fit.effects:
+            if EFFECTS[e].argument_parameters:
+                args[e] = {p.name: fit.value(f"{e}.{p.name}") for p in EFFECTS[e].argument_parameters}
+    return args
 
 
 # ------------------------------------------------------------------ the data

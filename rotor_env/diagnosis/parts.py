@@ -156,17 +156,12 @@ def _refit_date(grid: ShootingGrid, whole: OutputErrorFit, sides: RecordParts) -
     either side named, at the sides' values) fitted on each side of every candidate cut, the
     cut where the two sums of squares together are least (a coarse grid over the middle of
     the record, then finer around its best).  ``None`` where no cut could be fitted."""
-    from ..effects import EFFECTS
-    from .output_error import fit_output_error, start_from
+    from .output_error import arguments_of, fit_output_error, start_from
 
     fits = (sides.after.after, sides.before.after)
     effects = tuple(dict.fromkeys(e for f in fits for e in f.effects))
     start = {e: v for f in reversed(fits) for e, v in start_from(f).items()}
-    args = {}
-    for f in reversed(fits):
-        for e in f.effects:
-            if EFFECTS[e].argument_parameters:
-                args[e] = {p.name: f.value(f"{e}.{p.name}") for p in EFFECTS[e].argument_parameters}
+    args = arguments_of(*fits)
     S = len(grid.segments)
     lo, hi = max(MIN_PART_SEGMENTS, int(0.15 * S)), min(S - MIN_PART_SEGMENTS, int(0.85 * S))
     cost: dict[int, float] = {}
