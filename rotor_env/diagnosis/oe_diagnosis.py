@@ -85,6 +85,10 @@ MAX_ADDED = 3
 #: fitted to convergence
 SCREEN_ITERATIONS = 2
 SCREEN_KEEP = 3
+#: the screening reads every other shooting segment when the record has at least this many
+#: (the ranking needs each candidate's fall, not its last digit; the candidates kept are
+#: fitted to convergence on every segment, and every decision is made on those fits)
+SCREEN_HALF_FROM = 24
 CRACKS = ("asymmetry", "breathing_crack")
 #: the side load a crack is tried with (:func:`_with_side_load`)
 SIDE_LOAD = "static_load"
@@ -273,8 +277,25 @@ class OutputErrorDiagnosis(Result):
 def _excess(fit: OutputErrorFit, floor: float) -> float:
     """The residual energy above the noise floor that a candidate's relevance is measured
     against: never less than the floor's own uncertainty's share (:data:`FLOOR_UNCERTAINTY`)."""
-    noise = floor * floor * fit.n_rows
-    return max(fit.rss - noise, ((1.0 + FLOOR_UNCERTAINTY) ** 2 - 1.0) * noise)
+    return _excess_of(fit.rss, fit.n_rows, floor)
+
+
+def _excess_of(rss: float, n_rows: int, floor: float) -> float:
+    noise = floor * floor * n_rows
+    return max(rss - noise, ((1.0 + FLOOR_UNCERTAINTY) ** 2 - 1.0) * noise)
+
+
+def _screening_grid(fit: OutputErrorFit) -> tuple[ShootingGrid, np.ndarray, float, int]:
+    """The grid the candidates are screened on (every other segment of ``fit``'s, where it has
+    :data:`SCREEN_HALF_FROM` or more), ``fit``'s start states and residual energy there, and
+    its rows."""
+    g = fit.grid
+    if len(g.segments) < SCREEN_HALF_FROM:
+        return g, fit.x0, fit.rss, fit.n_rows
+    sel = np.arange(0, len(g.segments), 2)
+    sub = replace(g, segments=g.segments[sel])
+    rows = np.concatenate([np.arange(i0, i1 + 1) for i0, i1 in sub.segments])
+    return sub, fit.x0[sel], float(np.sum(fit.residual[rows] ** 2)), 2 * len(rows)
 
 
 def _leaning(detect: dict[str, Detectability], level: float) -> tuple[list[str], str]:
@@ -377,7 +398,7 @@ def _half_turn_orientation(effect: str):
     return None
 
 
-def _screen(grid, model, effect, base_fit):
+def _screen(grid, model, effect, base_fit, x0=None):
     """The candidate from each of its starts, a few Levenberg-Marquardt steps each: the best.
 
     A half-turn orientation (a crack's axis, the supports' axis) is not searched from
@@ -393,7 +414,7 @@ def _screen(grid, model, effect, base_fit):
         for axis in (0.0, math.pi / 4):
             try:
                 f = fit_output_error(grid, (*model, effect), {**base, effect: np.zeros(1)}, previous=base_fit,
-                                     fixed_args={effect: {p.name: axis}}, max_iter=SCREEN_ITERATIONS)
+                                     fixed_args={effect: {p.name: axis}}, x0=x0, max_iter=SCREEN_ITERATIONS)
             except (FloatingPointError, np.linalg.LinAlgError, ValueError):
                 comps = []
                 break
@@ -405,7 +426,7 @@ def _screen(grid, model, effect, base_fit):
             starts = [{**base, effect: {name: D, p.name: axis}}]
     for st in starts:
         try:
-            f = fit_output_error(grid, (*model, effect), st, previous=base_fit, max_iter=SCREEN_ITERATIONS)
+            f = fit_output_error(grid, (*model, effect), st, previous=base_fit, x0=x0, max_iter=SCREEN_ITERATIONS)
         except (FloatingPointError, np.linalg.LinAlgError, ValueError):
             continue
         if best is None or f.rss < best.rss:
@@ -413,13 +434,14 @@ def _screen(grid, model, effect, base_fit):
     return best
 
 
-def _converge(grid, model, effect, screened):
-    """The screened fit to convergence, its argument values (orientation, clearance) with it."""
+def _converge(grid, model, effect, screened, x0):
+    """The screened fit to convergence on every segment of ``grid`` (start states ``x0``: the
+    model's fit's), its argument values (orientation, clearance) with it; ``None`` where it
+    fails."""
     try:
-        full = fit_output_error(grid, (*model, effect), {}, previous=screened, max_iter=40)
+        return fit_output_error(grid, (*model, effect), {}, previous=screened, x0=x0, max_iter=40)
     except (FloatingPointError, np.linalg.LinAlgError, ValueError):
-        return screened
-    return full if full.rss <= screened.rss else screened
+        return None
 
 
 def _physical_problem(fit: OutputErrorFit, effect: str, base: OutputErrorFit | None = None) -> str:
@@ -569,10 +591,12 @@ def diagnose_output_error(
                                      for c in todo if c in detect)
                          + ": tried")
         excess = _excess(current, floor)
+        screen_grid, screen_x0, screen_rss, screen_rows = _screening_grid(current)
+        screen_excess = _excess_of(screen_rss, screen_rows, floor)
         fits = {}
         step(f"waveforms, round {rnd}: output-error screening of each candidate", total=len(todo), unit="candidates")
         for c in todo:
-            f = _screen(grid, _with_side_load(cur_model, c, lib), c, current)
+            f = _screen(screen_grid, _with_side_load(cur_model, c, lib), c, current, x0=screen_x0)
             advance()
             say(f"round {rnd}: {c} screened" + (f" (residual {f.rms / floor:.3g}x the floor)" if f else " (diverged)"))
             if f is not None:
@@ -587,15 +611,23 @@ def diagnose_output_error(
             keep.append("rub")
         step(f"waveforms, round {rnd}: the best candidates fitted to convergence", total=len(keep),
              unit="candidates")
-        for c in keep:
+        for c in list(keep):
             advance()
-            fits[c] = _converge(grid, _with_side_load(cur_model, c, lib), c, fits[c])
+            full = _converge(grid, _with_side_load(cur_model, c, lib), c, fits[c], current.x0)
+            if full is None:
+                del fits[c]
+                keep.remove(c)
+                say(f"round {rnd}: {c} diverged when fitted to convergence")
+                continue
+            fits[c] = full
             say(f"round {rnd}: {c} fitted (residual {fits[c].rms / floor:.3g}x the floor)")
         n = max(len(fits), 1)
         round_rows = []
         for c, f in fits.items():
             _, _, lp = f.wald(c)
-            relevance = (current.rss - f.rss) / excess
+            # a candidate screened out was fitted on the screening grid only: its fall there
+            relevance = ((current.rss - f.rss) / excess if c in keep
+                         else (screen_rss - f.rss) / screen_excess)
             reason = ""
             if c not in keep:
                 reason = (f"screened out: after {SCREEN_ITERATIONS} steps from each start it removes "

@@ -70,10 +70,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from identifier.hac import andrews_bandwidth, chi2_log10_sf, long_run_covariance
 
@@ -219,20 +220,25 @@ def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, q
     cx2 = np.zeros(ncol)
     xp = np.zeros(4)
     argp = arg.copy()
+    # the sensitivities carried: the parameters' (coefficients, then arguments) and the start
+    # state's; jac's output-term columns between them stay zero (no state depends on them),
+    # and leaving them out of the integration saves almost half its work
     nf = jac.shape[2]
     nx0 = nf - 4
-    S = np.zeros((4, nf))
+    nq = pidx.shape[0] + qidx.shape[0]
+    ns = nq + 4
+    S = np.zeros((4, ns))
     x = np.zeros(4)
     xs = np.zeros(4)
-    Ss = np.zeros((4, nf))
+    Ss = np.zeros((4, ns))
     k1 = np.zeros(4)
     k2 = np.zeros(4)
     k3 = np.zeros(4)
     k4 = np.zeros(4)
-    K1 = np.zeros((4, nf))
-    K2 = np.zeros((4, nf))
-    K3 = np.zeros((4, nf))
-    K4 = np.zeros((4, nf))
+    K1 = np.zeros((4, ns))
+    K2 = np.zeros((4, ns))
+    K3 = np.zeros((4, ns))
+    K4 = np.zeros((4, ns))
     for s in range(s0, s1):
         i0 = seg[s, 0]
         i1 = seg[s, 1]
@@ -240,12 +246,15 @@ def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, q
             x[q] = x0[s, q]
         S[:, :] = 0.0
         for q in range(4):
-            S[q, nx0 + q] = 1.0
+            S[q, nq + q] = 1.0
         pred[i0, 0] = x[0]
         pred[i0, 1] = x[1]
-        for c in range(nf):
+        for c in range(nq):
             jac[i0, 0, c] = S[0, c]
             jac[i0, 1, c] = S[1, c]
+        for q in range(4):
+            jac[i0, 0, nx0 + q] = S[0, nq + q]
+            jac[i0, 1, nx0 + q] = S[1, nq + q]
         for k in range(i0, i1):
             dts = t[k + 1] - t[k]
             a = (phid[k + 1] - phid[k]) / dts
@@ -259,7 +268,7 @@ def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, q
                 for q in range(4):
                     xs[q] = x[q] + hh * k1[q]
                 for q in range(4):
-                    for c in range(nf):
+                    for c in range(ns):
                         Ss[q, c] = S[q, c] + hh * K1[q, c]
                 pm = p0 + w0 * hh + 0.5 * a * hh * hh
                 wm = w0 + a * hh
@@ -268,14 +277,14 @@ def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, q
                 for q in range(4):
                     xs[q] = x[q] + hh * k2[q]
                 for q in range(4):
-                    for c in range(nf):
+                    for c in range(ns):
                         Ss[q, c] = S[q, c] + hh * K2[q, c]
                 rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
                     k3, K3)
                 for q in range(4):
                     xs[q] = x[q] + dt * k3[q]
                 for q in range(4):
-                    for c in range(nf):
+                    for c in range(ns):
                         Ss[q, c] = S[q, c] + dt * K3[q, c]
                 pe = p0 + w0 * dt + 0.5 * a * dt * dt
                 we = w0 + a * dt
@@ -284,16 +293,19 @@ def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, q
                 for q in range(4):
                     x[q] += dt / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
                 for q in range(4):
-                    for c in range(nf):
+                    for c in range(ns):
                         S[q, c] += dt / 6.0 * (K1[q, c] + 2.0 * K2[q, c] + 2.0 * K3[q, c] + K4[q, c])
             if not (abs(x[0]) < DIVERGED and abs(x[1]) < DIVERGED and abs(x[2]) < DIVERGED
                     and abs(x[3]) < DIVERGED):
                 return k + 1
             pred[k + 1, 0] = x[0]
             pred[k + 1, 1] = x[1]
-            for c in range(nf):
+            for c in range(nq):
                 jac[k + 1, 0, c] = S[0, c]
                 jac[k + 1, 1, c] = S[1, c]
+            for q in range(4):
+                jac[k + 1, 0, nx0 + q] = S[0, nq + q]
+                jac[k + 1, 1, nx0 + q] = S[1, nq + q]
     return 0
 '''
 
@@ -484,6 +496,21 @@ class ShootingGrid:
     def n(self) -> int:
         return len(self.t)
 
+    @cached_property
+    def inside(self) -> np.ndarray:
+        """The samples in a segment (the rows a fit on this grid reads)."""
+        mask = np.zeros(self.n, dtype=bool)
+        for i0, i1 in self.segments:
+            mask[i0:i1 + 1] = True
+        return mask
+
+    @cached_property
+    def output_basis(self) -> tuple[np.ndarray, ...]:
+        """``sin phi, cos phi, cos 2 phi, sin 2 phi`` at the samples in a segment: the output
+        terms' columns (:data:`OUTPUT_TERMS`), the same at every shot of a fit."""
+        phi = self.phi[self.inside]
+        return np.sin(phi), np.cos(phi), np.cos(2 * phi), np.sin(2 * phi)
+
     def start_states(self) -> np.ndarray:
         i = self.segments[:, 0]
         return np.column_stack([self.y[i, 0], self.y[i, 1], self.rates[i, 0], self.rates[i, 1]])
@@ -594,15 +621,11 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset):
     # the kernel leaves the offsets' columns at zero (no state depends on them)
     status = kernel.module.shoot(grid.t, grid.phi, grid.phid, grid.segments, x0, theta, arg, active,
                                  pidx, qidx, qlo, qhi, grid.ip, grid.substeps, pred, jac)
-    inside = np.zeros(grid.n, dtype=bool)
-    for i0, i1 in grid.segments:
-        inside[i0:i1 + 1] = True
+    inside = grid.inside
     # the output's nuisance terms (OUTPUT_TERMS): static offsets (x, y); a probe track's 1X
     # runout R e^{i phi} + R_b e^{-i phi} in z = th_y + i th_x (any 1X pattern on each axis);
     # its 2X, any pattern of 2 phi on each axis
-    phi = grid.phi[inside]
-    s, c = np.sin(phi), np.cos(phi)
-    s2, c2 = np.sin(2 * phi), np.cos(2 * phi)
+    s, c, c2, s2 = grid.output_basis
     pred[inside, 0] += (offset[0] + offset[2] * s + offset[3] * c + offset[4] * c2 + offset[5] * s2
                         - offset[8] * s + offset[9] * c)
     pred[inside, 1] += (offset[1] + offset[2] * c - offset[3] * s + offset[6] * c2 + offset[7] * s2
@@ -624,22 +647,25 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset):
     return status, pred, jac
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _reduced_normal_equations(r, jac, seg, npq):
     """Variable projection in normal-equation form: per segment ``G = Jx'Jx``,
     ``C = Jx'Jp``, ``c = Jx'r``; the reduced ``H = sum Jp'Jp - C'G^-1 C`` and
     ``g = sum Jp'r - C'G^-1 c``; ``Gi_C``, ``Gi_c`` give the start states' step
-    ``dx0_s = Gi_c - Gi_C d`` for a parameter step ``d``."""
+    ``dx0_s = Gi_c - Gi_C d`` for a parameter step ``d``.  The segments in parallel
+    (independent), each adding its own part, summed after."""
     ns = seg.shape[0]
-    H = np.zeros((npq, npq))
-    g = np.zeros(npq)
+    Hs = np.zeros((ns, npq, npq))
+    gs = np.zeros((ns, npq))
     GiC = np.zeros((ns, 4, npq))
     Gic = np.zeros((ns, 4))
     nf = jac.shape[2]
-    for s in range(ns):
+    for s in prange(ns):
         G = np.zeros((4, 4))
         C = np.zeros((4, npq))
         c = np.zeros(4)
+        H = np.zeros((npq, npq))
+        g = np.zeros(npq)
         for k in range(seg[s, 0], seg[s, 1] + 1):
             for ch in range(2):
                 rk = r[k, ch]
@@ -655,14 +681,19 @@ def _reduced_normal_equations(r, jac, seg, npq):
                     g[a] += ja * rk
                     for b in range(a, npq):
                         H[a, b] += ja * jac[k, ch, b]
+        for a in range(npq):
+            for b in range(a):
+                H[a, b] = H[b, a]
         Gi = np.linalg.pinv(G)
         GiC[s] = Gi @ C
         Gic[s] = Gi @ c
-        H -= C.T @ GiC[s]
-        g -= C.T @ Gic[s]
-    for a in range(npq):
-        for b in range(a):
-            H[a, b] = H[b, a]
+        Hs[s] = H - C.T @ GiC[s]
+        gs[s] = g - C.T @ Gic[s]
+    H = np.zeros((npq, npq))
+    g = np.zeros(npq)
+    for s in range(ns):
+        H += Hs[s]
+        g += gs[s]
     return H, g, GiC, Gic, nf
 
 
