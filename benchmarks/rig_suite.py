@@ -36,24 +36,27 @@ against probe noise, the per-fault table, every failure, the time per record.
 from __future__ import annotations
 
 import os
+import sys
 
 # one BLAS / numba thread per worker: set before numpy loads (spawned workers inherit it)
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+# only where numba is not loaded yet (imported by the tests it is: a changed NUMBA_NUM_THREADS
+# then makes numba refuse to compile once its thread pool runs)
+if "numba" not in sys.modules:
+    for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import math  # noqa: E402
-import platform  # noqa: E402
-import statistics  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from dataclasses import asdict, dataclass  # noqa: E402
-from datetime import datetime, timezone  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import json
+import math
+import platform
+import statistics
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from datetime import datetime, timezone
+from pathlib import Path
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 FAULTS = ("asymmetry", "breathing_crack", "rub", "shaft_bow", "support_anisotropy", "cross_coupled_stiffness",
           "misalignment", "nonlinear_stiffness", "static_load")

@@ -92,3 +92,51 @@ def test_interval_coverage_on_noisy_displacements():
     lo = stats.binom.ppf(0.0005, n, 0.95)
     assert hits >= lo, f"coverage {hits}/{n}"
     assert hits / n <= 1.0
+
+
+def test_sizes_are_read_against_the_fitted_shaft():
+    """The fit frees the shaft stiffness k (the time unit of measured data is an estimate):
+    a record whose true shaft has k = 1.06 in the time unit it is fitted in.  Every size is
+    reported where the fitted shaft has k = 1 -- a crack's D and a side load relative to the
+    shaft's stiffness, the damping as 2 zeta -- so each truth is the simulated value over k
+    (c over sqrt k; the unbalance's eccentricity unchanged), within its 95 % interval
+    (read in the time unit as fitted, D would be 6 % high: 0.030 against 0.0284, ten of its intervals
+    away)."""
+    k = 1.06
+    noise = 5e-4
+    m, thx, thy = _record({"D": 0.03, "D_axis": 0.6, "k": k}, ("asymmetry",), noise=noise, seed=11)
+    grid = ShootingGrid.from_arrays(m.t, m.phi, m.phi_dot, thx, thy, 0.0, noise_std=noise)
+    d = diagnose_output_error(grid, ("unbalance", "viscous_damping"), ("asymmetry", "support_anisotropy"))
+    assert d.missing == ["asymmetry"]
+    p = d.parameters()
+    assert p["stiffness"]["values"]["k"] == pytest.approx(k, rel=1e-3)
+    for effect, name, truth in (("asymmetry", "D", 0.03 / k), ("viscous_damping", "c", 0.05 / math.sqrt(k)),
+                                ("unbalance", "tau", 0.005)):
+        got, half = p[effect]["values"][name], p[effect]["ci95"][name]
+        assert abs(got - truth) < 2 * half, (effect, name, got, truth, half)
+    assert abs(p["asymmetry"]["values"]["D"] - 0.03) > 5 * p["asymmetry"]["ci95"]["D"]
+
+
+def test_a_held_effect_acts_and_is_not_fitted():
+    """``held``: the effect's moment stays in the model at its start value, nothing of it is
+    fitted (the crack's amplitude rule holds a side load this way).  Held at the truth the
+    fit is as good as the free one; held at zero the side load's moment is missing."""
+    noise = 5e-4
+    extra = {"dk_crack": 0.06, "breathing_depth": 1.0, "breathing_phase": 0.3, "crack_axis": 0.4,
+             "load_y": -0.05, "load_x": 0.0}
+    m, thx, thy = _record(extra, ("breathing_crack", "static_load"), noise=noise, seed=5)
+    grid = ShootingGrid.from_arrays(m.t, m.phi, m.phi_dot, thx, thy, 0.0, noise_std=noise)
+    model = ("unbalance", "viscous_damping", "breathing_crack", "static_load")
+    start = {"unbalance": {"tau": 0.005, "beta": 0.3}, "viscous_damping": {"c": 0.05},
+             "breathing_crack": {k: v for k, v in extra.items() if not k.startswith("load")}}
+    free = fit_output_error(grid, model, {**start, "static_load": {"load_y": -0.05, "load_x": 0.0}})
+    held = fit_output_error(grid, model, {**start, "static_load": {"load_y": -0.05, "load_x": 0.0}},
+                            held=("static_load",))
+    zero = fit_output_error(grid, model, {**start, "static_load": {"load_y": 0.0, "load_x": 0.0}},
+                            held=("static_load",))
+    assert not any(n.startswith("static_load.") for n in held.names)
+    assert held.parameters("static_load")["load_y"] == pytest.approx(-0.05 / held.value("stiffness.k"))
+    assert held.rms < 1.01 * free.rms
+    assert zero.rms > 1.5 * free.rms
+    with pytest.raises(ValueError, match="held"):
+        fit_output_error(grid, ("unbalance",), held=("static_load",))

@@ -70,7 +70,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cache, cached_property
 from pathlib import Path
 
 import numpy as np
@@ -86,6 +86,7 @@ __all__ = [
     "ShootingGrid",
     "added_effect_information",
     "arguments_of",
+    "canonical_scale",
     "coefficient_slice",
     "equation_error_start",
     "fit_output_error",
@@ -143,11 +144,12 @@ def library_effects() -> tuple[str, ...]:
 # ------------------------------------------------------------------ the compiled kernel
 _KERNEL_TEMPLATE = '''
 @njit(cache=True)
-def rhs(ph, pd, pdd, x, S, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, fx, fS):
+def rhs(ph, pd, pdd, x, S, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, fx, fS):
+    # the moment of every coefficient of the model (midx); sensitivities of the free ones (pidx)
     columns(ph, pd, pdd, x[0], x[1], x[2], x[3], ip, arg, active, cy, cx)
     ay = -ip * pd * x[2]
     ax = ip * pd * x[3]
-    for j in pidx:
+    for j in midx:
         ay += theta[j] * cy[j]
         ax += theta[j] * cx[j]
     fx[0] = x[2]
@@ -168,7 +170,7 @@ def rhs(ph, pd, pdd, x, S, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx,
         columns(ph, pd, pdd, xp[0], xp[1], xp[2], xp[3], ip, arg, active, cy2, cx2)
         ay2 = -ip * pd * xp[2]
         ax2 = ip * pd * xp[3]
-        for j in pidx:
+        for j in midx:
             ay2 += theta[j] * cy2[j]
             ax2 += theta[j] * cx2[j]
         dax = (ax2 - ax) / h
@@ -196,7 +198,7 @@ def rhs(ph, pd, pdd, x, S, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx,
 
 
 @njit(cache=True, parallel=True)
-def shoot(t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, qlo, qhi, ip, nsub, pred, jac):
+def shoot(t, phi, phid, seg, x0, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, nsub, pred, jac):
     # the segments are independent (each from its own start state): chunks of them in parallel,
     # each writing its own rows of pred and jac
     nseg = seg.shape[0]
@@ -204,7 +206,7 @@ def shoot(t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, qlo, qhi, ip, n
     status = np.zeros(nchunk, np.int64)
     for ch in prange(nchunk):
         status[ch] = shoot_range(ch * nseg // nchunk, (ch + 1) * nseg // nchunk, t, phi, phid, seg, x0, theta,
-                                 arg, active, pidx, qidx, qlo, qhi, ip, nsub, pred, jac)
+                                 arg, active, pidx, midx, qidx, qlo, qhi, ip, nsub, pred, jac)
     for ch in range(nchunk):
         if status[ch] != 0:
             return status[ch]
@@ -212,7 +214,7 @@ def shoot(t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, qlo, qhi, ip, n
 
 
 @njit(cache=True)
-def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, qlo, qhi, ip, nsub, pred, jac):
+def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, nsub, pred, jac):
     ncol = theta.shape[0]
     cy = np.zeros(ncol)
     cx = np.zeros(ncol)
@@ -263,7 +265,7 @@ def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, q
                 tau0 = m * dt
                 p0 = phi[k] + phid[k] * tau0 + 0.5 * a * tau0 * tau0
                 w0 = phid[k] + a * tau0
-                rhs(p0, w0, a, x, S, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k1, K1)
+                rhs(p0, w0, a, x, S, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k1, K1)
                 hh = 0.5 * dt
                 for q in range(4):
                     xs[q] = x[q] + hh * k1[q]
@@ -272,14 +274,14 @@ def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, q
                         Ss[q, c] = S[q, c] + hh * K1[q, c]
                 pm = p0 + w0 * hh + 0.5 * a * hh * hh
                 wm = w0 + a * hh
-                rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
+                rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
                     k2, K2)
                 for q in range(4):
                     xs[q] = x[q] + hh * k2[q]
                 for q in range(4):
                     for c in range(ns):
                         Ss[q, c] = S[q, c] + hh * K2[q, c]
-                rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
+                rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
                     k3, K3)
                 for q in range(4):
                     xs[q] = x[q] + dt * k3[q]
@@ -288,7 +290,7 @@ def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, qidx, q
                         Ss[q, c] = S[q, c] + dt * K3[q, c]
                 pe = p0 + w0 * dt + 0.5 * a * dt * dt
                 we = w0 + a * dt
-                rhs(pe, we, a, xs, Ss, theta, arg, active, pidx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
+                rhs(pe, we, a, xs, Ss, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
                     k4, K4)
                 for q in range(4):
                     x[q] += dt / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
@@ -378,6 +380,48 @@ def decimation_filter(q: int) -> np.ndarray:
 def coefficient_slice(effect: str) -> slice:
     """Where ``effect``'s coefficients sit in a fit's :attr:`OutputErrorFit.theta_full`."""
     return slice(*_kernel(library_effects()).coef_slots[effect])
+
+
+#: the effect whose coefficient sets the model's time unit (its natural frequency sqrt(k))
+TIME_UNIT_EFFECT = "stiffness"
+
+
+@cache
+def time_degrees(effect: str) -> tuple[int, ...]:
+    """Each coefficient's degree in the time derivatives (``phid`` and the tilt rates count
+    once, ``phidd`` twice): a stiffness-like column 0, a damping 1, an unbalance 2.
+
+    The output-error fit frees the shaft stiffness ``k`` because the time unit ``w_ref`` is
+    itself an estimate; a coefficient ``theta`` of degree ``n`` then reads
+    ``theta k^((n - 2) / 2)`` in the units where the fitted shaft has ``k = 1`` (time
+    rescaled by ``sqrt(k)``, the equation divided by ``k``) -- the paper's units, where
+    the declared plausible ranges hold and a crack's size is relative to its shaft's
+    stiffness.  Read off the declared column function by doubling every time derivative."""
+    eff = EFFECTS[effect]
+    args = [p.default for p in eff.argument_parameters]
+    # a state beyond any default clearance (a rub's contact acts), rates and spin generic
+    state = (0.7, 1.3, 0.2, 0.061, -0.047, 0.013, 0.029)
+    fast = (state[0], 2 * state[1], 4 * state[2], state[3], state[4], 2 * state[5], 2 * state[6])
+    ry, rx = eff.columns(*state, 0.0, *args)
+    fy, fx = eff.columns(*fast, 0.0, *args)
+    out = []
+    for j in range(len(eff.coefficients)):
+        a = float(ry[j]) if abs(float(ry[j])) >= abs(float(rx[j])) else float(rx[j])
+        b = float(fy[j]) if abs(float(ry[j])) >= abs(float(rx[j])) else float(fx[j])
+        n = math.log2(b / a) if a != 0.0 and b / a > 0 else math.nan
+        if not (math.isfinite(n) and abs(n - round(n)) < 1e-6):
+            raise ValueError(f"effect {effect!r}: coefficient {eff.coefficients[j]!r}'s column is not homogeneous "
+                             "in the time derivatives")
+        out.append(int(round(n)))
+    return tuple(out)
+
+
+def canonical_scale(effect: str, k: float) -> np.ndarray:
+    """The factors ``k^((n - 2) / 2)`` that turn ``effect``'s coefficients fitted with the
+    stiffness ``k`` into the units where the shaft has ``k = 1`` (:func:`time_degrees`)."""
+    if effect == TIME_UNIT_EFFECT or not k > 0:
+        return np.ones(len(EFFECTS[effect].coefficients))
+    return np.array([k ** ((n - 2) / 2) for n in time_degrees(effect)])
 
 
 def start_from(fit: OutputErrorFit) -> dict[str, np.ndarray]:
@@ -555,14 +599,31 @@ class OutputErrorFit:
         return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
 
     def value(self, name: str) -> float:
+        """A free parameter's fitted value, or a held effect's coefficient (``held`` of
+        :func:`fit_output_error`) at the value it was held at."""
+        if name not in self.names:
+            effect, _, coef = name.partition(".")
+            eff = EFFECTS.get(effect)
+            if eff is not None and effect in self.effects and coef in eff.coefficients:
+                return float(self.theta_full[coefficient_slice(effect)][eff.coefficients.index(coef)])
         return float(self.values[self.names.index(name)])
 
-    def parameters(self, effect: str) -> dict[str, float]:
-        """Physical parameters of ``effect`` (its declaration's mapping), orientations in
-        ``[0, period)``."""
+    def coefficients(self, effect: str, k: float | None = None) -> np.ndarray:
+        """``effect``'s coefficients in the units where the fitted shaft has ``k = 1``
+        (:func:`time_degrees`; the stiffness itself as fitted); ``k``: another value of the
+        stiffness to convert with (the delta method's step)."""
         eff = EFFECTS[effect]
         coef = np.array([self.value(f"{effect}.{c}") for c in eff.coefficients])
-        out = dict(eff.from_coefficients(coef))
+        if TIME_UNIT_EFFECT not in self.effects:
+            return coef
+        k = self.value(f"{TIME_UNIT_EFFECT}.k") if k is None else k
+        return coef * canonical_scale(effect, k)
+
+    def parameters(self, effect: str) -> dict[str, float]:
+        """Physical parameters of ``effect`` (its declaration's mapping) in the units where
+        the fitted shaft has ``k = 1`` (:meth:`coefficients`), orientations in ``[0, period)``."""
+        eff = EFFECTS[effect]
+        out = dict(eff.from_coefficients(self.coefficients(effect)))
         for p in eff.argument_parameters:
             v = self.value(f"{effect}.{p.name}")
             out[p.name] = float(v % p.angle_period) if p.orientation else float(v)
@@ -586,9 +647,12 @@ class OutputErrorFit:
         return w, len(idx), chi2_log10_sf(w, len(idx)) if math.isfinite(w) else -math.inf
 
 
-def _free_layout(kernel: _Kernel, effects: Sequence[str], fixed_args: Mapping[str, Mapping[str, float]]):
+def _free_layout(kernel: _Kernel, effects: Sequence[str], fixed_args: Mapping[str, Mapping[str, float]],
+                 held: Sequence[str] = ()):
     pidx, qidx, qlo, qhi, names, owners = [], [], [], [], [], []
     for e in effects:
+        if e in held:
+            continue
         lo, hi = kernel.coef_slots[e]
         for j, c in zip(range(lo, hi), EFFECTS[e].coefficients, strict=True):
             pidx.append(j)
@@ -609,9 +673,16 @@ def _free_layout(kernel: _Kernel, effects: Sequence[str], fixed_args: Mapping[st
     return as_int(pidx), as_int(qidx), as_int(qlo), as_int(qhi), tuple(names), tuple(owners)
 
 
-def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset):
-    """Predictions and Jacobian columns: coefficients, arguments, the output terms
-    (:data:`OUTPUT_TERMS`), then the segment's start state."""
+def _moment_layout(kernel: _Kernel, effects: Sequence[str]) -> np.ndarray:
+    """Every coefficient slot of the model's effects (the moment sums them, free or held)."""
+    return np.asarray([j for e in effects for j in range(*kernel.coef_slots[e])], dtype=np.int64)
+
+
+def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, midx=None):
+    """Predictions and Jacobian columns: the free coefficients (``pidx``), arguments, the
+    output terms (:data:`OUTPUT_TERMS`), then the segment's start state; the moment is that
+    of the coefficients ``midx`` (default: the free ones)."""
+    midx = pidx if midx is None else midx
     npar = len(pidx) + len(qidx)
     nf = npar + N_OFFSETS + 4
     # rows outside the segments (a fit on a subset of them) predict the measurement itself:
@@ -620,7 +691,7 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset):
     jac = np.zeros((grid.n, 2, nf))
     # the kernel leaves the offsets' columns at zero (no state depends on them)
     status = kernel.module.shoot(grid.t, grid.phi, grid.phid, grid.segments, x0, theta, arg, active,
-                                 pidx, qidx, qlo, qhi, grid.ip, grid.substeps, pred, jac)
+                                 pidx, midx, qidx, qlo, qhi, grid.ip, grid.substeps, pred, jac)
     inside = grid.inside
     # the output's nuisance terms (OUTPUT_TERMS): static offsets (x, y); a probe track's 1X
     # runout R e^{i phi} + R_b e^{-i phi} in z = th_y + i th_x (any 1X pattern on each axis);
@@ -740,6 +811,7 @@ def fit_output_error(
     x0: np.ndarray | None = None,
     start_args: Mapping[str, Mapping[str, float]] | None = None,
     previous: OutputErrorFit | None = None,
+    held: Sequence[str] = (),
     max_iter: int = 40,
     tol: float = 1e-8,
 ) -> OutputErrorFit:
@@ -751,7 +823,10 @@ def fit_output_error(
     ``fixed_args``: argument parameters held at a value (not fitted); ``start_args``:
     argument start values (with ``start`` given as coefficient arrays); ``previous``: a fit
     whose effects' coefficients, arguments and start states seed this one (a model grown
-    by one effect starts where the smaller one ended).
+    by one effect starts where the smaller one ended); ``held``: effects of the model whose
+    coefficients stay at their start values (their moment acts, nothing of them is fitted:
+    a refit on part of the record keeps what that part alone cannot tell, a side load whose
+    product with a crack is all a record's low-amplitude half sees).
     """
     effects = tuple(dict.fromkeys(("stiffness", *effects)))
     lib = library_effects()
@@ -789,7 +864,11 @@ def fit_output_error(
                         arg[lo + q] = previous.arg_full[lo + q]
         if x0 is None and len(previous.x0) == len(grid.segments):
             x0 = previous.x0
-    pidx, qidx, qlo, qhi, names, owners = _free_layout(kernel, effects, fixed_args)
+    unknown = [e for e in held if e not in effects]
+    if unknown:
+        raise ValueError(f"held effects {unknown} are not in the model {effects}")
+    pidx, qidx, qlo, qhi, names, owners = _free_layout(kernel, effects, fixed_args, held)
+    midx = _moment_layout(kernel, effects)
     npq = len(pidx) + len(qidx) + N_OFFSETS
     names = (*names, *(f"output.{n}" for n in OUTPUT_TERMS))
     owners = (*owners, *("output",) * N_OFFSETS)
@@ -805,7 +884,7 @@ def fit_output_error(
         ar[qidx] = v[len(pidx):len(pidx) + len(qidx)]
         return th, ar, v[len(pidx) + len(qidx):].copy()
 
-    status, pred, jac = _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset)
+    status, pred, jac = _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, midx)
     if status:
         raise FloatingPointError("the model diverged from its start values")
     r = grid.y - pred
@@ -831,7 +910,8 @@ def fit_output_error(
             v_new = v + d
             th_new, ar_new, off_new = unpack(v_new)
             x0_new = x0 + Gic - GiC @ d
-            st, p_new, j_new = _shoot(kernel, grid, x0_new, th_new, ar_new, active, pidx, qidx, qlo, qhi, off_new)
+            st, p_new, j_new = _shoot(kernel, grid, x0_new, th_new, ar_new, active, pidx, qidx, qlo, qhi, off_new,
+                                      midx)
             r_new = grid.y - p_new
             with np.errstate(over="ignore", invalid="ignore"):  # a trial step that blew up is refused
                 rss_new = float(np.sum(r_new * r_new)) if st == 0 else math.inf
