@@ -1067,18 +1067,23 @@ def added_effect_information(fit: OutputErrorFit, effect: str,
     rest = [i for i in range(npq) if i not in mine]
     raw = np.vstack([jac[i0:i1 + 1, :, :npq].reshape(-1, npq) for i0, i1 in grid.segments])
     rt, Jt, _ = _project(grid, r, jac, npq)
-    A, B = Jt[:, mine], Jt[:, rest]
-    A_perp = _residual_part(A, B)
-    G0 = raw[:, mine].T @ raw[:, mine]
+    # every projection below is a least-squares fit among the columns of one tall matrix:
+    # with M = Q R (thin QR, once), min |M_B c - M_A| = min |R_B c - R_A| and M_A' M_B = R_A' R_B,
+    # so they are done on the small R (the residual as M's last column gives the score)
+    R = np.linalg.qr(np.column_stack([Jt, rt]), mode="r")
+    R_raw = np.linalg.qr(raw, mode="r")
+    A = R[:, mine]
+    A_perp = _residual_part(A, R[:, rest])
+    G0 = R_raw[:, mine].T @ R_raw[:, mine]
     G = A_perp.T @ A_perp
     top = _visible_shares(G0, G)[-1]
     absorbed = {}
     # without the segments' start states (the raw rows), then without each group in turn
-    A_raw_perp = _residual_part(raw[:, mine], raw[:, rest])
+    A_raw_perp = _residual_part(R_raw[:, mine], R_raw[:, rest])
     absorbed["the segments' start states"] = float(_visible_shares(G0, A_raw_perp.T @ A_raw_perp)[-1] - top)
     for g, cols in groups.items():
         others = [i for i in rest if i not in cols]
-        P = _residual_part(A, Jt[:, others])
+        P = _residual_part(A, R[:, others])
         absorbed[g] = float(_visible_shares(G0, P.T @ P)[-1] - top)
     absorbed = dict(sorted(absorbed.items(), key=lambda kv: -kv[1]))
     # the estimate's covariance at zero size: the residual's long-run variance per row times
@@ -1091,7 +1096,7 @@ def added_effect_information(fit: OutputErrorFit, effect: str,
     Gi = np.linalg.pinv(G, rcond=1e-13)
     cov = lrv * Gi
     # Rao's score test at zero size: the residual's projection on the effect's visible part
-    g = A_perp.T @ rt
+    g = A_perp.T @ R[:, npq]
     score = float(g @ Gi @ g) / lrv if lrv > 0 else 0.0
     return AddedEffectInformation(effect, tuple(eff.coefficients), given, G0, G, cov, absorbed, score, Gi @ g)
 
