@@ -486,6 +486,29 @@ def _physical_problem(fit: OutputErrorFit, effect: str, base: OutputErrorFit | N
     return ""
 
 
+def _comparison_note(rnd: int, row: Candidate, fit: OutputErrorFit, chosen: str, chosen_fit: OutputErrorFit,
+                     floor: float) -> str:
+    """A round's note on a fitted candidate beside the one named: it fits the data as well
+    (its residual energy within the 99 % point of a chi-square with its parameter count, in
+    units of the noise variance: both fits see the same noise, so it cancels) -- the data
+    cannot tell them apart; or it fits them better by more than that and a rule turned it
+    down -- said with the rule, not as a tie.  ``""`` otherwise."""
+    from scipy.stats import chi2
+
+    gap = (fit.rss - chosen_fit.rss) / (floor * floor)
+    level = float(chi2.ppf(0.99, len(fit.values)))
+    residuals = f"residual {fit.rms / floor:.4g}x vs {chosen_fit.rms / floor:.4g}x the floor"
+    if gap < -level:
+        return (f"round {rnd}: {row.effect} fits these data better than {chosen} ({residuals}) but is not named: "
+                f"{row.reason}")
+    if gap <= level:
+        return (f"round {rnd}: {row.effect} fits these data as well as {chosen} ({residuals}): the data cannot "
+                f"tell them apart; {chosen} is named "
+                + ("as the simpler (fewer parameters)" if len(fit.values) > len(chosen_fit.values)
+                   else "by the information criterion"))
+    return ""
+
+
 def _with_side_load(model: tuple[str, ...], effect: str, lib: Sequence[str]) -> tuple[str, ...]:
     """The model a candidate is tried in: a crack with the side load (gravity, a misaligned
     bearing).  A cracked shaft under a static deflection sees its stiffness turn against it:
@@ -705,22 +728,13 @@ def diagnose_output_error(
         tried.extend(round_rows)
         if chosen is None:
             break
-        # what these data cannot decide: another fitted candidate whose residual energy exceeds
-        # the chosen one's by less than the 99 % point of a chi-square with its parameter count
-        # (in units of the noise variance; both fits see the same noise, so it cancels)
-        from scipy.stats import chi2
-
-        best_rss = fits[chosen.effect].rss
+        # what these data cannot decide (and what fits better but a rule turned down)
         for r in round_rows:
             if r is chosen or r.effect not in keep or r.reason.startswith("not significant"):
                 continue
-            gap = (fits[r.effect].rss - best_rss) / (floor * floor)
-            if gap <= chi2.ppf(0.99, len(fits[r.effect].values)):
-                notes.append(f"round {rnd}: {r.effect} fits these data as well as {chosen.effect} (residual "
-                             f"{fits[r.effect].rms / floor:.4g}x vs {fits[chosen.effect].rms / floor:.4g}x the floor): "
-                             f"the data cannot tell them apart; {chosen.effect} is named "
-                             + ("as the simpler (fewer parameters)" if len(fits[r.effect].values)
-                                > len(fits[chosen.effect].values) else "by the information criterion"))
+            note = _comparison_note(rnd, r, fits[r.effect], chosen.effect, fits[chosen.effect], floor)
+            if note:
+                notes.append(note)
         # the chosen fit's model: a crack comes with the side load it was fitted with, and
         # replaces the other crack (_with_side_load)
         new_model = tuple(e for e in fits[chosen.effect].effects if e != "stiffness")
