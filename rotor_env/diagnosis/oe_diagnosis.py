@@ -554,7 +554,7 @@ def _crack_split(grid: ShootingGrid, fit: OutputErrorFit, effect: str) -> str:
             return ""
         i = f.names.index(coef_name)
         # in the units of each half's own fitted shaft (k = 1): the halves' time units differ
-        scale = float(f.coefficients(effect)[0] / f.values[i]) if f.values[i] != 0 else 1.0
+        scale = float(canonical_scale(effect, f.value(f"{TIME_UNIT_EFFECT}.k"))[0])
         res.append((scale * f.values[i], abs(scale) * math.sqrt(max(f.covariance[i, i], 0.0))))
     (lo, se_lo), (hi, se_hi) = res
     z = abs(hi - lo) / math.hypot(se_lo, se_hi) if (se_lo > 0 or se_hi > 0) else 0.0
