@@ -122,7 +122,9 @@ compared in the same sense.  A crack's size: ``asymmetry`` ``D`` as is;
 a ``breathing_crack`` fitted to an open crack is the same stiffness at ``D = dk / 4`` with the
 stiff axis 90 deg from ``crack_axis`` (``rig_suite.crack_errors``).  For a breathing crack
 ``dk_crack`` is set against ``dk / k`` and ``crack_axis`` against ``psi`` (mod 180 deg; the
-package's axis and breathing phase trade half turns).  The floor ratio is the diagnosis's
+package's axis and breathing phase trade half turns); a ``hinge_crack`` (Gasch's law) names
+which side opens: ``dk_hinge`` against ``dk / k`` and ``hinge_axis`` against ``psi`` mod 360
+deg.  The floor ratio is the diagnosis's
 ``noise_floor`` over the probes' true noise std.
 
 How to run
@@ -168,7 +170,7 @@ PROBE_DEG = {"x": 45.0, "y": -45.0}
 DOWN = math.pi
 CASES = ("healthy", "asymmetry", "breathing_crack", "breathing_crack_side", "rub", "shaft_bow",
          "support_anisotropy", "cross_coupled_stiffness", "runout", "gravity")
-CRACKS = ("asymmetry", "breathing_crack")
+CRACKS = ("asymmetry", "breathing_crack", "hinge_crack")
 #: what the diagnosis should name for each case (any one of them); empty: nothing
 EXPECTED = {"healthy": (), "asymmetry": CRACKS, "breathing_crack": CRACKS, "breathing_crack_side": CRACKS,
             "rub": ("rub",), "shaft_bow": ("shaft_bow",), "support_anisotropy": ("support_anisotropy",),
@@ -525,6 +527,12 @@ def crack_comparison(case: str, truth: dict, params: dict) -> dict:
                 "axis_deg": ax % 180.0, "true_axis_deg": truth["axis_deg"],
                 "axis_error_deg": abs(_wrap(ax - truth["axis_deg"], 180.0))}
     if case.startswith("breathing_crack"):
+        if "hinge_crack" in params:  # the mouth's direction: which side opens is known (mod 360)
+            v = params["hinge_crack"]["values"]
+            dk, ax = float(v["dk_hinge"]), math.degrees(float(v.get("hinge_axis", 0.0)))
+            return {"as": "hinge_crack", "size": dk, "true_size": truth["dk"],
+                    "size_error": abs(dk / truth["dk"] - 1.0), "axis_deg": ax % 360.0,
+                    "true_axis_deg": truth["axis_deg"], "axis_error_deg": abs(_wrap(ax - truth["axis_deg"], 360.0))}
         if "breathing_crack" in params:
             v = params["breathing_crack"]["values"]
             dk, ax, via = float(v["dk_crack"]), math.degrees(float(v.get("crack_axis", 0.0))), "breathing_crack"

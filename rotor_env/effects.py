@@ -42,6 +42,7 @@ __all__ = [
     "Effect",
     "Parameter",
     "candidate_effects",
+    "crack_effects",
     "fault_ranges",
     "get_effect",
     "register_effect",
@@ -160,8 +161,11 @@ class Effect:
         (synchronous) vector model can carry it (:func:`synchronous_effects`).
     whirl: a linear fixed-frame effect with constant coefficients, part of the whirl
         (Campbell) model of the final diagnosis (:func:`whirl_effects`).
+    crack: a crack's stiffness law (:func:`crack_effects`): the waveform diagnosis tries it
+        with the side load that makes it breathe, in place of the model's other crack, and
+        names it only where it is not a rub (:mod:`rotor_env.diagnosis.oe_diagnosis`).
 
-    These four fields are the only lists of effects: every list of the package is
+    These five fields are the only lists of effects: every list of the package is
     derived from them, so that adding an effect is one :func:`register_effect`.
     """
 
@@ -188,6 +192,8 @@ class Effect:
     synchronous: bool = False
     #: part of the linear fixed-frame whirl (Campbell) model
     whirl: bool = False
+    #: a crack's stiffness law (one crack per model; named only where it is not a rub)
+    crack: bool = False
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -337,6 +343,17 @@ def _breathing_crack(phi, phid, phidd, th_x, th_y, w_x, w_y, ip, axis=0.0):
     # M = (dk/4) (1 + depth cos(phi + alpha)) G; coefficients
     # (dk/4, depth dk/4 cos alpha, depth dk/4 sin alpha)
     return (g_y, c * g_y, -s * g_y), (g_x, c * g_x, -s * g_x)
+
+
+def _hinge_crack(phi, phid, phidd, th_x, th_y, w_x, w_y, ip, axis=0.0):
+    # Gasch's hinge: the crack's mouth n = e^{i(phi + axis)} (fixed frame); the deflection
+    # across it xi = Re(conj(n) z) opens the crack while it stretches the mouth (xi > 0) and
+    # shuts it otherwise: M = dk max(xi, 0) n.  max as (xi + |xi|)/2: plain arithmetic for
+    # numba, floats and arrays alike, and the breathing follows the state, not the angle
+    s, c = np.sin(phi + axis), np.cos(phi + axis)
+    xi = th_y * c + th_x * s
+    opened = 0.5 * (xi + np.abs(xi))
+    return (opened * c,), (opened * s,)
 
 
 #: the rub's default radial clearance (tilt units, rad): the column function's default
@@ -502,6 +519,11 @@ def synchronous_effects() -> tuple[str, ...]:
     return tuple(e.name for e in EFFECTS.values() if e.synchronous)
 
 
+def crack_effects() -> tuple[str, ...]:
+    """The cracks' stiffness laws (open, breathing, hinge), in registration order."""
+    return tuple(e.name for e in EFFECTS.values() if e.crack)
+
+
 def whirl_effects() -> tuple[str, ...]:
     """The linear fixed-frame effects of the whirl (Campbell) model, in registration order."""
     return tuple(e.name for e in EFFECTS.values() if e.whirl)
@@ -583,6 +605,7 @@ register_effect(
         "signature); synchronous response stays 1x",
         orders=(1, 2),
         lookalikes=('breathing_crack', 'misalignment', 'support_anisotropy'),
+        crack=True,
         candidate=True,
     )
 )
@@ -833,9 +856,42 @@ register_effect(
         "2x and 3x peaks); the always-open asymmetry has the 2x only",
         orders=(1, 2, 3),
         lookalikes=('asymmetry', 'misalignment'),
+        crack=True,
         candidate=True,
         fault_range=(("dk_crack", 0.02, 0.1), ("breathing_depth", 0.5, 1.0),
                      ("breathing_phase", -math.pi, math.pi)),
+    )
+)
+
+register_effect(
+    Effect(
+        name="hinge_crack",
+        parameters=(
+            Parameter("dk_hinge", 0.05, "stiffness lost across the crack while it is open (Delta k / k)", 0.0, 0.6,
+                      "a crack through half the shaft lowers the bending stiffness across it by about 60 %",
+                      _NON_NEGATIVE),
+            Parameter("hinge_axis", 0.0, "direction of the crack's mouth (the normal of its faces, pointing out of "
+                      "the crack) on the shaft from the keyphasor notch, in the direction of rotation [rad]",
+                      angle_period=2 * math.pi),
+        ),
+        coefficients=("dk_hinge",),
+        columns=_hinge_crack,
+        to_coefficients=_identity(("dk_hinge",))[0],
+        from_coefficients=_identity(("dk_hinge",))[1],
+        moment="dk max(xi, 0) n,  n = e^{i (phi + axis)},  xi = Re(conj(n) z)  (Gasch's hinge: open while the "
+        "deflection stretches the mouth, shut otherwise)",
+        cause="a transverse fatigue crack whose faces part while the bending across them is tensile and close "
+        "flat while it is compressive: the stiffness switches between k - dk and k with the sign of the "
+        "deflection across the mouth, not with the shaft's angle (Gasch 1993's hinge model)",
+        signature="under a static deflection larger than the vibration (gravity, a side load) it opens and shuts "
+        "once per turn like the breathing crack, with a square wave instead of a cosine: 1x, 2x, 3x and "
+        "higher, resonances at 1/2 and 1/3 of the critical; where the vibration outgrows the static "
+        "deflection (at the critical) it breathes with the whirl: a synchronous whirl keeps it open or shut "
+        "and the critical's two sides see different stiffnesses",
+        orders=(1, 2, 3),
+        lookalikes=("breathing_crack", "asymmetry", "misalignment"),
+        crack=True,
+        candidate=True,
     )
 )
 

@@ -99,3 +99,24 @@ def test_rub_not_named_a_crack():
 def test_rub_named():
     o = outcome("rub")
     assert "rub" in o["named"], _describe(o)
+
+
+def test_gasch_hinge_crack_under_gravity_named_with_its_side():
+    """Gasch's hinge (the crack open while the deflection stretches its mouth), under a
+    horizontal rotor's sag of several hundred um: named ``hinge_crack`` (not a cosine-breathing
+    crack plus a misalignment, as before the hinge was declared), its size within 5 % and its
+    mouth's direction within 5 deg over a whole turn (the hinge knows which side opens)."""
+    o = fr.run_one("breathing_crack", SEED, NOISE_UM, fs=2500.0, crack_law="gasch", psi_deg=300.0)
+    assert "error" not in o, _describe(o)
+    assert o["named"] == ["hinge_crack"] and o["verdict"] == "explained_after_adding", _describe(o)
+    assert o["crack"]["as"] == "hinge_crack", _describe(o)
+    assert o["crack"]["size_error"] <= 0.05 and o["crack"]["axis_error_deg"] <= 5.0, _describe(o)
+
+
+def test_gasch_hinge_crack_breathing_with_the_whirl_named():
+    """The same hinge under a side load of a fifth of the peak: through the critical it opens
+    and shuts with the whirl, not with the shaft's angle (no angle-driven law holds it)."""
+    o = fr.run_one("breathing_crack_side", SEED, NOISE_UM, fs=2500.0, crack_law="gasch", psi_deg=140.0)
+    assert "error" not in o, _describe(o)
+    assert o["named"] == ["hinge_crack"] and o["verdict"] == "explained_after_adding", _describe(o)
+    assert o["crack"]["size_error"] <= 0.05 and o["crack"]["axis_error_deg"] <= 5.0, _describe(o)
