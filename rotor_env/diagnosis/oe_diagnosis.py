@@ -414,13 +414,17 @@ def _crack_laws_from_lead(grid, screen_grid, screen_x0, model, lib, fits, keep, 
     hinge breathes with the whirl alone and its screening stalls far off (a horizontal rig's
     hinge crack under a 494 um sag: 15.5x the floor after the screening against 1.29x for the
     cosine), while from the cosine's load and axis it converges to 1.003x, its size within
-    0.3 % and its axis within 0.1 deg.  ``{crack: fit}`` where the crack was screened out, or
+    0.3 % and its axis within 0.1 deg.  Only where the lead's side load is significant (5 %):
+    the laws differ in how they read it.  ``{crack: fit}`` where the crack was screened out, or
     where this fit beats the one it had."""
     leads = [c for c in keep if c in fits and c in CRACKS and SIDE_LOAD in fits[c].effects]
     if not leads:
         return {}
     lead = min(leads, key=lambda c: fits[c].rss)
     lead_fit = fits[lead]
+    if not lead_fit.wald(SIDE_LOAD)[2] < math.log10(0.05):
+        # no side load to read: the lead's start gives the other laws nothing their own lack
+        return {}
     load = start_from(lead_fit)[SIDE_LOAD]
     orient = EFFECTS[lead].orientation_parameters
     axis0 = lead_fit.value(f"{lead}.{orient[0].name}") if orient else 0.0
@@ -567,6 +571,28 @@ def _gap(fit: OutputErrorFit, other: OutputErrorFit, floor: float) -> tuple[floa
     from scipy.stats import chi2
 
     return (fit.rss - other.rss) / (floor * floor), float(chi2.ppf(0.99, len(fit.values)))
+
+
+def _simpler_crack_law_first(accepted: list[Candidate], fits: dict, floor: float) -> list[Candidate]:
+    """``accepted`` (best first) with a simpler crack law moved ahead of the crack law ranked
+    first where it ties with it and has no more parameters (with fewer, the information
+    criterion already prefers it): a law that assumes more is named only where it fits
+    better.  An open crack whose weak axis lies along the unbalance is, to a run-up, a hinge
+    open below the critical and shut above it, where the response hardly sees the stiffness
+    (rig suite seed 7: both 0.9918x the floor)."""
+    if not accepted or accepted[0].effect not in CRACKS:
+        return accepted
+    first = fits[accepted[0].effect]
+    simpler = []
+    for r in accepted[1:]:
+        f = fits[r.effect]
+        gap, level = _gap(f, first, floor)
+        if _simpler_crack_law(r.effect, accepted[0].effect) and len(f.values) <= len(first.values) and gap <= level:
+            simpler.append(r)
+    if not simpler:
+        return accepted
+    pick = min(simpler, key=lambda r: CRACKS.index(r.effect))
+    return [pick, *[r for r in accepted if r is not pick]]
 
 
 def _simpler_crack_law(a: str, b: str) -> bool:
@@ -777,20 +803,7 @@ def diagnose_output_error(
             asym = next((r for r in round_rows if r.effect == "asymmetry"), None)
             if asym is not None and asym.accepted and abs(depth) <= half:
                 accepted = [asym, *[r for r in accepted if r is not asym]]
-        # a crack law that assumes more is named only where it fits better than a simpler one
-        # with as few parameters (beyond the tie of _gap; with fewer, the criterion already
-        # prefers it): an open crack whose weak axis lies along the unbalance is, to a run-up,
-        # a hinge open below the critical and shut above it, where the response hardly sees
-        # the stiffness (rig suite seed 7: both 0.9918x the floor)
-        if accepted and accepted[0].effect in CRACKS:
-            first = accepted[0]
-            simpler = [r for r in accepted[1:] if _simpler_crack_law(r.effect, first.effect)
-                       and len(fits[r.effect].values) <= len(fits[first.effect].values)
-                       and _gap(fits[r.effect], fits[first.effect], floor)[0]
-                       <= _gap(fits[r.effect], fits[first.effect], floor)[1]]
-            if simpler:
-                pick = min(simpler, key=lambda r: CRACKS.index(r.effect))
-                accepted = [pick, *[r for r in accepted if r is not pick]]
+        accepted = _simpler_crack_law_first(accepted, fits, floor)
         chosen = None
         for r in accepted:
             if r.effect in CRACKS:
