@@ -56,6 +56,42 @@ def test_package_lists_are_the_declarations():
     assert FAULT_RANGES["support_anisotropy"] == (ParamRange("support_anisotropy", -0.08, 0.08, "support_anisotropy"),)
 
 
+def test_the_crack_laws_are_the_declarations():
+    from rotor_env.diagnosis.oe_diagnosis import CRACKS
+    from rotor_env.effects import crack_effects
+
+    assert tuple(CRACKS) == crack_effects() == tuple(n for n, e in EFFECTS.items() if e.crack)
+    assert {"asymmetry", "breathing_crack", "hinge_crack"} <= set(CRACKS)
+
+
+def test_the_hinge_is_gasch_s_body_frame_stiffness():
+    """``hinge_crack``'s moment against the hinge written in the shaft's body axes: the crack's
+    mouth xi at the fixed-frame angle phi + axis (z = th_y + i th_x: y is the real axis), the
+    stiffness across it k - dk while the deflection stretches it (xi > 0), k otherwise --
+    ``-R diag(k - dk H(xi), k) R' q`` minus the healthy ``-k q``; continuous where it switches."""
+    rng = np.random.default_rng(7)
+    eff = EFFECTS["hinge_crack"]
+    dk = 0.07
+    for _ in range(200):
+        phi, axis = rng.uniform(0, 4 * np.pi), rng.uniform(0, 2 * np.pi)
+        q = rng.normal(size=2)  # (th_y, th_x)
+        a = phi + axis
+        R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        xi = (R.T @ q)[0]
+        K = np.diag([1.0 - dk * (xi > 0), 1.0])
+        expected = -R @ K @ R.T @ q + q
+        cy, cx = eff.columns(phi, 0.0, 0.0, q[1], q[0], 0.0, 0.0, 0.3, axis)
+        assert np.allclose([dk * cy[0], dk * cx[0]], expected, atol=1e-12)
+    # at the switch the moment is zero from both sides (no jump: the simulator integrates it)
+    phi, axis = 0.3, 1.1
+    n = np.array([np.cos(phi + axis), np.sin(phi + axis)])
+    t = np.array([-n[1], n[0]])  # across the mouth: xi = 0
+    for eps in (1e-9, -1e-9):
+        q = t + eps * n
+        cy, cx = eff.columns(phi, 0.0, 0.0, q[1], q[0], 0.0, 0.0, 0.3, axis)
+        assert abs(cy[0]) < 1e-8 and abs(cx[0]) < 1e-8
+
+
 def test_a_bad_fault_range_is_refused():
     with pytest.raises(ValueError, match="fault_range entry"):
         register_effect(Effect(**{**HARDENING.__dict__, "name": "bad_range", "fault_range": (("nope", 0.0, 1.0),)}))
