@@ -150,8 +150,9 @@ class DiagnosisFigures:
 
     #: effects whose moment mirrors a whirl ``z ~ e^{i w t}`` into ``e^{i (m Omega - w) t}``
     #: (``conj(z) e^{i m phi}``): a rotating asymmetry (m = 2); its residual sits there, not at
-    #: its declared 1x/2x, when the record holds free whirl (the crack's opening excites it)
-    MIRRORING: ClassVar[dict[str, int]] = {"asymmetry": 2, "breathing_crack": 2}
+    #: its declared 1x/2x, when the record holds free whirl (the crack's opening excites it);
+    #: Gasch's hinge too (``max(xi, 0) n`` holds ``xi n / 2 = (z + conj(z) n^2) / 4``)
+    MIRRORING: ClassVar[dict[str, int]] = {"asymmetry": 2, "breathing_crack": 2, "hinge_crack": 2}
 
     def _mirrored_whirl(self) -> list[tuple[str, int, np.ndarray, np.ndarray]]:
         """``(effect, m, speed, order)`` of each added mirroring effect: the order
