@@ -435,12 +435,11 @@ def _crack_laws_from_lead(grid, screen_grid, screen_x0, model, lib, fits, keep, 
             continue
         p = eff.orientation_parameters[0]
         m = _with_side_load(model, c, lib)
-        coef = np.array(eff.to_coefficients({q.name: q.default for q in eff.parameters} | _SMALL_START.get(c, {})))
         best = None
         for k in range(4):
+            start = {SIDE_LOAD: load, c: {**_SMALL_START.get(c, {}), p.name: axis0 + k * math.pi / 2}}
             try:
-                f = fit_output_error(screen_grid, (*m, c), {SIDE_LOAD: load, c: coef}, previous=current,
-                                     start_args={c: {p.name: axis0 + k * math.pi / 2}}, x0=screen_x0,
+                f = fit_output_error(screen_grid, (*m, c), start, previous=current, x0=screen_x0,
                                      max_iter=SCREEN_ITERATIONS)
             except (FloatingPointError, np.linalg.LinAlgError, ValueError):
                 continue
