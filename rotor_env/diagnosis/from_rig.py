@@ -159,8 +159,10 @@ class RigDiagnosis(Result):
         d = self.diagnosis
         if not isinstance(d, OutputErrorDiagnosis) or d.rms_ratio_after > EXPLAINED_RATIO or d.added:
             return []
-        if self.changed_parts is not None:
-            return []  # two rotors in one record: the vectors' one model reads neither
+        if self.changed_parts is not None or d.not_throughout:
+            # two rotors in one record: the vectors' one model reads neither (what the
+            # waveforms' one model named for the change, the vectors' would name for it too)
+            return []
         lib = library_effects()
         return [e for e in self.vectors.missing if e in lib and e not in d.missing]
 

@@ -60,7 +60,7 @@ from .output_error import (
     library_effects,
     start_from,
 )
-from .parts import RecordParts, split_at_change
+from .parts import RecordParts, absent_on_a_side, split_at_change
 
 __all__ = ["OutputErrorDiagnosis", "diagnose_output_error"]
 
@@ -171,6 +171,12 @@ class OutputErrorDiagnosis(Result):
         return out
 
     @property
+    def not_throughout(self) -> dict[str, str]:
+        """Effects the one model of the whole record named for a change during it: not there on
+        one side of the break (:func:`.parts.absent_on_a_side`), so not named."""
+        return {e: r for e, r in self.rejected.items() if "rule present_throughout" in r}
+
+    @property
     def undecidable(self) -> dict[str, str]:
         """Effects these data cannot decide at any size, each with the reason."""
         return {e: d.sentence() for e, d in self.detectability.items() if not d.decidable}
@@ -275,6 +281,14 @@ class OutputErrorDiagnosis(Result):
             lines.append("the smallest size each effect not named would show at (dimensionless):")
             lines += [f"  {d.sentence()}" for d in decidable]
         return "\n".join(lines)
+
+
+def _constancy(fit: OutputErrorFit, floor: float, alpha: float) -> ParameterChange | None:
+    """The parameter-constancy test of ``fit`` (:mod:`.change`); ``None`` where it fails."""
+    try:
+        return parameter_constancy(fit, alpha=alpha, explained=fit.rms / floor <= EXPLAINED_RATIO)
+    except FloatingPointError:
+        return None
 
 
 def _excess(fit: OutputErrorFit, floor: float) -> float:
@@ -846,6 +860,33 @@ def diagnose_output_error(
         cur_model = (*[e for e in cur_model if e in new_model], *[e for e in new_model if e not in cur_model])
         current = fits[chosen.effect]
         say(f"round {rnd}: {chosen.effect} added: residual {current.rms / floor:.3g}x the noise floor")
+    # one model for the whole record: is it the same rotor all through? (a crack that opens
+    # above the critical barely lifts the residual, but the fit's scores drift at its onset)
+    change = _constancy(current, floor, alpha)
+    if change is not None and change.significant and added:
+        # what the one model named must be there on both sides of the break (parts module)
+        absent = absent_on_a_side(grid, change, current, added, alpha=alpha)
+        if absent:
+            kept = [e for e in added if e not in absent]
+            drop = set(absent)
+            if (SIDE_LOAD in cur_model and SIDE_LOAD not in model and SIDE_LOAD not in kept
+                    and not any(e in CRACKS for e in kept)):
+                drop.add(SIDE_LOAD)  # it came with a crack that goes
+            new_model = tuple(e for e in cur_model if e not in drop)
+            try:
+                refit = fit_output_error(grid, new_model, previous=current, x0=current.x0)
+            except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+                refit = None
+            if refit is not None:
+                for r in tried:
+                    if r.effect in absent and r.accepted:
+                        r.accepted, r.reason = False, absent[r.effect]
+                notes.append(f"{', '.join(absent)}: named by the one model of the whole record for its change "
+                             f"(not there on one side of the break); refitted without: residual "
+                             f"{refit.rms / floor:.3g}x the floor (was {current.rms / floor:.3g}x)")
+                say(f"{', '.join(absent)} not there on one side of the break: not named")
+                current, cur_model, added = refit, new_model, kept
+                change = _constancy(current, floor, alpha)
     # what the data cannot decide: each candidate the final model lacks, asked how much of
     # its signature the model and the nuisance terms take and how large it would have to be
     # to show (a static load in the probes' offsets, a cross-coupling in the damping)
@@ -855,12 +896,6 @@ def diagnose_output_error(
                             min_fall=RELEVANT_SHARE * _excess(current, floor))
     say(f"detectability of {len(detect)} effects not named: "
         f"{sum(not d.decidable for d in detect.values())} cannot be decided")
-    # one model for the whole record: is it the same rotor all through? (a crack that opens
-    # above the critical barely lifts the residual, but the fit's scores drift at its onset)
-    try:
-        change = parameter_constancy(current, alpha=alpha, explained=current.rms / floor <= EXPLAINED_RATIO)
-    except FloatingPointError:
-        change = None
     parts = None
     # two rotors in one record: the one model does not explain it and its parameters drift.
     # A record one model explains is one rotor as far as its residual can tell: there the drift

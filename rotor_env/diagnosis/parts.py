@@ -27,12 +27,24 @@ and the record stays one rotor.  A crack that opens above the critical changes t
 response there by a fraction of a micrometre and leaves the record explained: its change is
 dated, not named.  Each side holds fewer samples than the record, so its detectability is
 lower.
+
+**Present on both sides** (:func:`absent_on_a_side`).  An effect the whole record's model
+names must be there on each side of a break the change test found.  Where one side's own fit
+(the whole model, its arguments held, started from the whole fit) finds the effect's
+coefficients consistent with zero (HAC Wald, 5 %) and rejects the whole record's values
+(Bonferroni over the effects and sides), the effect is the trace of the change, not a
+property of the rotor: a crack that opens above the critical moves the 1X there by 0.1-0.2 um,
+and a shaft bow of constant size over the whole record took that move (before the break the
+record's own bow coefficients were 0.0009 in size, the whole record's 0.0084: log10 p = -0.6
+that the side's are zero, -52.7 that they are the whole record's).  Both conditions are needed: a true effect on a rotor whose 1X drifts
+(keyphasor, runout) is significant on each side, and an effect the side cannot see is not
+rejected there.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Protocol
 
@@ -60,7 +72,7 @@ class SideDiagnosis(Protocol):
 
     def to_dict(self) -> dict: ...
 
-__all__ = ["MIN_PART_SEGMENTS", "RecordParts", "split_at_change"]
+__all__ = ["MIN_PART_SEGMENTS", "RecordParts", "absent_on_a_side", "split_at_change"]
 
 #: each side needs at least this many shooting segments to be diagnosed on its own
 MIN_PART_SEGMENTS = 8
@@ -192,6 +204,66 @@ def _refit_date(grid: ShootingGrid, whole: OutputErrorFit, sides: RecordParts) -
     return float(grid.t[grid.segments[best - 1, 1]])
 
 
+def _sides(grid: ShootingGrid, t_break: float) -> tuple[int, np.ndarray, np.ndarray] | None:
+    """The segments before and after a break at model time ``t_break`` (the number of
+    segments up to it, then each side's segment indices): the break is dated to a block, so
+    the segment either side of the cut may hold it, and one segment of a changed rotor lifts
+    its side's residual -- both left out.  ``None`` where a side would hold fewer than
+    :data:`MIN_PART_SEGMENTS` segments."""
+    ends = grid.t[grid.segments[:, 1]]
+    n_first = int(np.sum(ends <= t_break))
+    before, after = np.arange(0, max(n_first - 1, 0)), np.arange(n_first + 1, len(grid.segments))
+    if n_first < 1 or min(len(before), len(after)) < MIN_PART_SEGMENTS:
+        return None
+    return n_first, before, after
+
+
+def absent_on_a_side(grid: ShootingGrid, change: ParameterChange, whole: OutputErrorFit,
+                     effects: Sequence[str], *, alpha: float = 0.05) -> dict[str, str]:
+    """Each of ``effects`` (named on the whole record) that one side of ``change``'s break
+    does not hold (module docstring: present on both sides), with the reason; ``{}`` where
+    every one is on both sides, or the sides are too short to fit."""
+    from identifier.hac import chi2_log10_sf
+
+    from ..effects import EFFECTS
+    from .output_error import arguments_of, fit_output_error, start_from
+
+    cut = _sides(grid, change.t_break)
+    if cut is None or not effects:
+        return {}
+    _, before, after = cut
+    level = math.log10(alpha / (2 * len(effects)))
+    out: dict[str, str] = {}
+    for side, idx in (("before", before), ("after", after)):
+        try:
+            f = fit_output_error(replace(grid, segments=grid.segments[idx]), whole.effects, start_from(whole),
+                                 x0=whole.x0[idx], fixed_args=arguments_of(whole), max_iter=REFIT_ITERATIONS)
+        except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+            continue
+        for e in effects:
+            if e in out:
+                continue
+            coefs = EFFECTS[e].coefficients
+            pos = [i for i, nm in enumerate(f.names) if nm.split(".", 1)[0] == e and nm.split(".", 1)[1] in coefs]
+            if not pos:
+                continue
+            th = f.values[pos]
+            th_whole = np.array([whole.value(f.names[i]) for i in pos])
+            cov = f.covariance[np.ix_(pos, pos)]
+            try:
+                w_zero = float(th @ np.linalg.solve(cov, th))
+                w_same = float((th - th_whole) @ np.linalg.solve(cov, th - th_whole))
+            except np.linalg.LinAlgError:
+                continue
+            lp_zero, lp_same = chi2_log10_sf(w_zero, len(pos)), chi2_log10_sf(w_same, len(pos))
+            if lp_zero > math.log10(0.05) and lp_same < level:
+                out[e] = (f"rule present_throughout: not there {side} the break the change test dates -- that "
+                          f"side's own fit finds it absent (log10 p = {lp_zero:.3g} that it is zero) and not the "
+                          f"whole record's value (log10 p = {lp_same:.3g}): the one model of the whole record "
+                          "named it for the change")
+    return out
+
+
 def split_at_change(grid: ShootingGrid, change: ParameterChange, whole: OutputErrorFit,
                     diagnose: Callable[[ShootingGrid], SideDiagnosis]) -> RecordParts | None:
     """Cut ``grid`` between the shooting segments at ``change``'s break and ``diagnose`` each
@@ -206,14 +278,12 @@ def split_at_change(grid: ShootingGrid, change: ParameterChange, whole: OutputEr
     ends = grid.t[grid.segments[:, 1]]
 
     def cut(t_break: float) -> RecordParts | None:
-        n_first = int(np.sum(ends <= t_break))
-        # the break is dated to a block (whole segments): the segment either side of the cut may
-        # hold it, and one segment of a changed rotor lifts its side's residual -- both left out
-        seg_before, seg_after = grid.segments[:max(n_first - 1, 0)], grid.segments[n_first + 1:]
-        if n_first < 1 or min(len(seg_before), len(seg_after)) < MIN_PART_SEGMENTS:
+        sides = _sides(grid, t_break)
+        if sides is None:
             return None
-        return RecordParts(float(ends[n_first - 1]), diagnose(replace(grid, segments=seg_before)),
-                           diagnose(replace(grid, segments=seg_after)))
+        n_first, before, after = sides
+        return RecordParts(float(ends[n_first - 1]), diagnose(replace(grid, segments=grid.segments[before])),
+                           diagnose(replace(grid, segments=grid.segments[after])))
 
     parts = cut(change.t_break)
     if parts is None:
