@@ -72,6 +72,48 @@ def test_a_crack_appearing_mid_record_is_a_change_at_its_time():
     assert diag.to_dict()["change"]["significant"] is True
 
 
+def _change_at(grid, t_break):
+    """A break at model time ``t_break`` as the change test reports one (significant)."""
+    from rotor_env.diagnosis.change import ParameterChange
+
+    return ParameterChange(99.0, 1e-4, 6, t_break, t_break / grid.t[-1], {}, 0.05, True)
+
+
+def test_an_effect_named_for_a_change_is_absent_on_one_side_and_a_constant_one_is_not():
+    """rule present_throughout (rotor_env.diagnosis.parts.absent_on_a_side), with known truth,
+    three noise draws: one model of a record whose crack (D = 0.03) appears at 45 % (just past
+    the critical) names an asymmetry of about half its size for the whole record; the side
+    before the crack finds none and rejects that size -- flagged on at least two of the three
+    (a side of 9 segments through the critical can find a crack it has not: seed 1's before
+    side reads D = 0.016 at log10 p = -2.9, and then nothing is flagged).  The same crack
+    present all through, cut at the same time, is on both sides: flagged on none."""
+    from rotor_env.diagnosis.parts import absent_on_a_side
+
+    T = 0.45 * T_END
+    model = (*MODEL, "asymmetry")
+    flagged_appearing, flagged_constant = 0, 0
+    for seed in (1, 2, 3):
+        appearing = _grid(Crack(T, 0.03), seed=seed)
+        whole = fit_output_error(appearing, model, equation_error_start(appearing, model))
+        assert whole.parameters("asymmetry")["D"] == pytest.approx(0.015, abs=0.005)  # half the crack
+        flagged = absent_on_a_side(appearing, _change_at(appearing, T), whole, ["asymmetry"])
+        if flagged:
+            assert list(flagged) == ["asymmetry"], flagged
+            assert flagged["asymmetry"].startswith("rule present_throughout: not there before the break")
+            flagged_appearing += 1
+
+        p = RotorParams(ip=0.0, effects=("stiffness", "unbalance", "viscous_damping", "asymmetry"),
+                        values={"tau": 0.005, "beta": 0.3, "c": 0.05, "D": 0.03, "D_axis": 0.5})
+        m = Simulator(p).run(t_end=T_END, dt=0.04, run_up=RunUp(rate=0.005, speed0=0.4))
+        rng = np.random.default_rng(seed)
+        constant = ShootingGrid.from_arrays(m.t, m.phi, m.phi_dot, m.theta_x + rng.normal(0, NOISE, len(m.t)),
+                                            m.theta_y + rng.normal(0, NOISE, len(m.t)), 0.0, noise_std=NOISE)
+        whole = fit_output_error(constant, model, equation_error_start(constant, model))
+        assert whole.wald("asymmetry")[2] < -10  # the crack is plainly in the record
+        flagged_constant += bool(absent_on_a_side(constant, _change_at(constant, T), whole, ["asymmetry"]))
+    assert flagged_appearing >= 2 and flagged_constant == 0, (flagged_appearing, flagged_constant)
+
+
 def _rig_record(tmp_path, crack_at_rpm=None, seed=3, D=0.03, noise=0.5):
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -103,8 +145,12 @@ def test_rig_crack_appearing_above_the_critical_is_a_change_in_seconds_and_rpm(t
     assert "not the same over the record, most at" in out["change"]["sentence"]
     assert out["change"]["t_s"] == pytest.approx(7.0, abs=0.4)
     assert out["change"]["rpm"] == pytest.approx(2400.0, abs=120.0)
-    # one model explains the record: it is not diagnosed apart (module docstring of .parts)
+    # one model explains the record: it is not diagnosed apart (module docstring of .parts);
+    # what its one model would name for the change (a shaft bow taking the 1X's move) is not
+    # there before the break, so nothing is named: the change is said, the effect is not
     assert out["parts"] is None
+    assert out["verdict"] == "explained" and out["missing"] == [], out["missing"]
+    assert all("rule present_throughout" in r for e, r in out["rejected"].items() if e == "shaft_bow")
     (tmp_path / "healthy").mkdir()
     healthy = diagnose_rig(_rig_record(tmp_path / "healthy", None, seed=4)).to_dict()
     assert healthy["verdict"] == "explained" and not healthy["change"]["significant"], healthy["change"]

@@ -140,3 +140,19 @@ def test_a_held_effect_acts_and_is_not_fitted():
     assert zero.rms > 1.5 * free.rms
     with pytest.raises(ValueError, match="held"):
         fit_output_error(grid, ("unbalance",), held=("static_load",))
+
+
+def test_an_argument_held_at_a_value_is_read_back_where_it_was_held():
+    """``fixed_args``: an argument (the crack's axis) held in a refit is not a free parameter,
+    and the fit's physical parameters report it at the value it was held at (a side's refit
+    of ``parts.absent_on_a_side`` holds the whole record's axis)."""
+    noise = 5e-4
+    m, thx, thy = _record({"D": 0.03, "D_axis": 0.5}, ("asymmetry",), noise=noise, seed=2)
+    grid = ShootingGrid.from_arrays(m.t, m.phi, m.phi_dot, thx, thy, 0.0, noise_std=noise)
+    model = ("unbalance", "viscous_damping", "asymmetry")
+    start = {"unbalance": {"tau": 0.005, "beta": 0.3}, "viscous_damping": {"c": 0.05}, "asymmetry": {"D": 0.03}}
+    held = fit_output_error(grid, model, start, fixed_args={"asymmetry": {"D_axis": 0.5}})
+    assert "asymmetry.D_axis" not in held.names
+    values = held.parameters("asymmetry")
+    assert values["D_axis"] == pytest.approx(0.5, abs=1e-12)
+    assert values["D"] == pytest.approx(0.03, rel=0.05)

@@ -606,6 +606,10 @@ class OutputErrorFit:
             eff = EFFECTS.get(effect)
             if eff is not None and effect in self.effects and coef in eff.coefficients:
                 return float(self.theta_full[coefficient_slice(effect)][eff.coefficients.index(coef)])
+            args = [p.name for p in eff.argument_parameters] if eff is not None and effect in self.effects else []
+            if coef in args:  # an argument held at a value (``fixed_args``): where it was held
+                lo, _ = _kernel(library_effects()).arg_slots[effect]
+                return float(self.arg_full[lo + args.index(coef)])
         return float(self.values[self.names.index(name)])
 
     def coefficients(self, effect: str, k: float | None = None) -> np.ndarray:
