@@ -69,7 +69,7 @@ the Campbell branches).
 """
 
 from .criticals import critical_speeds, whirl_branches, whirl_modes
-from .fit import QUASI_STEADY_TOL, W_REF_DECADES, VectorFit, fit_vectors
+from .fit import QUASI_STEADY_TOL, W_REF_DECADES, VectorFit, extra_mode_vectors, fit_vectors
 from .model import RUNOUT, SECOND_MODE, VECTOR_EFFECTS, SynchronousModel, known_effects
 from .response import LEAD_IN_REVS, MAX_TRANSIENT_SAMPLES, vector_orders, vector_probe_matrix
 
@@ -84,6 +84,7 @@ __all__ = [
     "SynchronousModel",
     "VectorFit",
     "critical_speeds",
+    "extra_mode_vectors",
     "fit_vectors",
     "known_effects",
     "vector_orders",

@@ -32,7 +32,7 @@ from .response import (
     vector_probe_matrix,
 )
 
-__all__ = ["QUASI_STEADY_TOL", "W_REF_DECADES", "VectorFit", "fit_vectors"]
+__all__ = ["QUASI_STEADY_TOL", "W_REF_DECADES", "VectorFit", "extra_mode_vectors", "fit_vectors"]
 
 #: quasi-steady is used only where it is within this fraction of the peak of the transient
 QUASI_STEADY_TOL = 0.01
@@ -78,11 +78,22 @@ class VectorFit:
 
     @property
     def criticals(self) -> list[dict[str, float]]:
-        out = critical_speeds(self.model, self.coef(), self.w_ref, self.table.speed)
+        return sorted(self.rotor_criticals + self.extra_criticals, key=lambda d: d["rpm"])
+
+    @property
+    def rotor_criticals(self) -> list[dict[str, float]]:
+        """The criticals of the rotor model itself (one mode; two where the supports split it)."""
+        return critical_speeds(self.model, self.coef(), self.w_ref, self.table.speed)
+
+    @property
+    def extra_criticals(self) -> list[dict[str, float]]:
+        """The criticals of the added modes (:data:`SECOND_MODE`): another mode of the rotor and
+        its supports, outside the rotor model."""
+        out: list[dict[str, float]] = []
         for w, c in self.extra_modes:
             iso = _isotropic(self.model.ip)
             out += critical_speeds(iso, iso.coef_vector({"viscous_damping": np.array([c])}), w, self.table.speed)
-        return sorted(out, key=lambda d: d["rpm"])
+        return out
 
     def coef(self) -> np.ndarray:
         return self.model.coef_vector(self.structural, {k: v for k, v in self.forcing.items() if k != SECOND_MODE})
@@ -410,6 +421,23 @@ def _predict(prob: _Problem, B: np.ndarray, sol: np.ndarray) -> np.ndarray:
     for j in range(B.shape[2] - n_f):
         pred = pred + B[..., n_f + j] * (sol[n_f + 2 * j] + 1j * sol[n_f + 2 * j + 1])
     return pred
+
+
+def extra_mode_vectors(fit: VectorFit) -> np.ndarray | None:
+    """The added modes' share (:data:`SECOND_MODE`) of ``fit.predicted`` (rows, probes *
+    orders): the response of another mode of the rotor and its supports, which the rotor
+    model does not hold; ``None`` where the fit has none."""
+    if not fit.extra_modes:
+        return None
+    prob = _Problem(fit.model, fit.table, fit.method, orders=fit.orders)
+    n_x = 1 + sum(n for _, n in prob.struct_sizes) + 2 * prob.n_extra
+    x, sol = fit.params[:n_x], fit.params[n_x:]
+    B = prob.expand(prob.basis_vectors(x))
+    n_b = len(prob.basis)
+    # each probe's own copy of the forcing columns where the table has no probe angles
+    cols = [c * n_b + j for c in range(prob.n_forcing // max(n_b, 1)) for j, (e, _) in enumerate(prob.basis)
+            if e == SECOND_MODE]
+    return np.einsum("rpn,n->rp", B[..., cols], sol[cols])
 
 
 def _finish(prob: _Problem, x: np.ndarray, success: bool) -> VectorFit:
