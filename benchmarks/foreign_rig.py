@@ -81,6 +81,18 @@ Faults (one per record; sizes and angles drawn from the seed):
   only.
 * ``gravity``: a healthy horizontal rotor under its weight ``m g`` (the static sag alone; a
   linear rotor's sag is a constant the probes' DC removal takes away).
+* ``two_modes`` (what a finite-element code's rotor has): a second disk of mass ``mu m``
+  (``mu`` 0.5-1.5) on the same shaft, the probes at the first.  The shaft holds each disk to
+  the bearings with a stiffness in proportion to its mass (``k``, ``mu k``) and couples them
+  with ``kc``; the damping is in proportion to the masses.  The first mode (the disks
+  together) is at ``fn``, the second (against each other) at ``r fn`` with ``r`` 1.3-2.5:
+  ``kc = (m (r wn)^2 - k) / (1 + 1/mu)``.  The second disk has its own unbalance (0.5-2 times
+  the first's, at its own angle).  The run still goes 0.3-1.8 ``fn``, so the second critical
+  is inside the run (``r`` < 1.8) or above it, where its response still grows with speed.
+  Expected: no fault (the 1X vectors' ``second_mode`` is tolerated).
+* ``two_modes_crack``: the same rotor with an open crack (``asymmetry``, ``D`` 0.03-0.06) in
+  the first disk's stretch of shaft, its stiff axis at ``psi``.  The first mode sees
+  ``D / (1 + mu)`` of it (its modal stiffness is ``k (1 + mu)``): that is the size compared.
 
 Recording, like a data acquisition system: sample rate 2.5, 5, 10 or 20 kHz (drawn, or
 ``--fs``); the keyphasor an ideal square notch sampled at that rate (5 V, 0 V in the notch, the
@@ -169,15 +181,20 @@ PROBE_DEG = {"x": 45.0, "y": -45.0}
 #: the direction the weight pulls in (fixed frame, from x = top dead centre)
 DOWN = math.pi
 CASES = ("healthy", "asymmetry", "breathing_crack", "breathing_crack_side", "rub", "shaft_bow",
-         "support_anisotropy", "cross_coupled_stiffness", "runout", "gravity")
+         "support_anisotropy", "cross_coupled_stiffness", "runout", "gravity", "two_modes", "two_modes_crack")
 CRACKS = ("asymmetry", "breathing_crack", "hinge_crack")
 #: what the diagnosis should name for each case (any one of them); empty: nothing
 EXPECTED = {"healthy": (), "asymmetry": CRACKS, "breathing_crack": CRACKS, "breathing_crack_side": CRACKS,
             "rub": ("rub",), "shaft_bow": ("shaft_bow",), "support_anisotropy": ("support_anisotropy",),
-            "cross_coupled_stiffness": ("cross_coupled_stiffness",), "runout": (), "gravity": ()}
-#: named without being wrong (gravity: the sag is a true static load, though unobservable)
+            "cross_coupled_stiffness": ("cross_coupled_stiffness",), "runout": (), "gravity": (),
+            "two_modes": (), "two_modes_crack": CRACKS}
+#: named without being wrong (gravity: the sag is a true static load, though unobservable; a
+#: second mode is there)
 TOLERATED = {"gravity": ("static_load",), "breathing_crack": ("static_load",),
-             "breathing_crack_side": ("static_load",)}
+             "breathing_crack_side": ("static_load",), "two_modes": ("second_mode",),
+             "two_modes_crack": ("second_mode",)}
+#: the cases that are a crack
+CRACK_CASES = ("asymmetry", "breathing_crack", "breathing_crack_side", "two_modes_crack")
 SAMPLE_RATES = (2500.0, 5000.0, 10000.0, 20000.0)
 NOTCH_FRACTION = 0.04
 KP_HIGH_V = 5.0
@@ -304,6 +321,44 @@ def _rhs(r: Rotor):
     return rhs
 
 
+def _rhs_two_disks(r: Rotor):
+    """The two-disk rotor (module docstring, ``two_modes``): ``s = (x1, y1, x1', y1', x2, y2,
+    x2', y2')``; an open crack (``D``) in the first disk's stretch of shaft."""
+    m, k, p = r.m, r.k, r.p
+    mu, kc, D, e2, beta2 = p["mu"], p["kc"], p.get("D", 0.0), p["e2"], p["beta2"]
+    m2, k2, c1 = mu * m, mu * k, r.c
+    c2 = mu * c1
+    W0, A, phi0, beta, nu, psi = r.W0, r.alpha, r.phi0, r.beta, r.nu, p.get("psi", 0.0)
+    me1, me2 = m * r.e, m2 * e2
+    cos, sin = math.cos, math.sin
+
+    def rhs(t, s):
+        x1, y1, vx1, vy1, x2, y2, vx2, vy2 = s
+        if t > 0:
+            ph, W, a = phi0 + W0 * t + 0.5 * A * t * t, W0 + A * t, A
+        else:
+            ph, W, a = phi0 + W0 * t, W0, 0.0
+        c_1, s_1 = cos(ph + beta), sin(ph + beta)
+        c_2, s_2 = cos(ph + beta2), sin(ph + beta2)
+        f1x = me1 * (W * W * c_1 + a * s_1) - c1 * vx1 - kc * (x1 - x2)
+        f1y = me1 * (W * W * s_1 - a * c_1) - c1 * vy1 - kc * (y1 - y2)
+        f2x = me2 * (W * W * c_2 + a * s_2) - c2 * vx2 - k2 * x2 - kc * (x2 - x1)
+        f2y = me2 * (W * W * s_2 - a * c_2) - c2 * vy2 - k2 * y2 - kc * (y2 - y1)
+        if D:  # the first disk's shaft in its body axes
+            th = ph + nu + psi
+            ct, st = cos(th), sin(th)
+            xi, eta = x1 * ct + y1 * st, -x1 * st + y1 * ct
+            fxi, feta = -k * (1 + D) * xi, -k * (1 - D) * eta
+            f1x += fxi * ct - feta * st
+            f1y += fxi * st + feta * ct
+        else:
+            f1x -= k * x1
+            f1y -= k * y1
+        return [vx1, vy1, f1x / m, f1y / m, vx2, vy2, f2x / m2, f2y / m2]
+
+    return rhs
+
+
 def _start_state(r: Rotor, t_start: float) -> list[float]:
     """The isotropic linear rotor's steady state at the first speed (plus the static sag)."""
     W = r.W0
@@ -320,7 +375,10 @@ def integrate(r: Rotor, t: np.ndarray) -> np.ndarray:
     t_settle = min(5.0 / (r.zeta * r.wn), 8.0)
     rhs = _rhs(r)
     atol = [1e-13, 1e-13, 1e-11, 1e-11]
-    pre = solve_ivp(rhs, (-t_settle, 0.0), _start_state(r, -t_settle), method="DOP853", rtol=1e-9, atol=atol)
+    start = _start_state(r, -t_settle)
+    if "kc" in r.p:  # two disks: settled from rest over the same time (5 decay times of the first mode)
+        rhs, atol, start = _rhs_two_disks(r), atol * 2, [0.0] * 8
+    pre = solve_ivp(rhs, (-t_settle, 0.0), start, method="DOP853", rtol=1e-9, atol=atol)
     if not pre.success:
         raise RuntimeError(f"settling run failed: {pre.message}")
     sol = solve_ivp(rhs, (0.0, float(t[-1])), pre.y[:, -1], method="DOP853", rtol=1e-9, atol=atol, t_eval=t)
@@ -388,6 +446,13 @@ def draw_rotor(seed: int, case: str, *, fs: float | None = None, crack_law: str 
         p = {"load_N": rotor.m * G, "load_dir": DOWN}
     elif case == "runout":
         daq["runout"] = tuple((float(rng.uniform(3.0, 8.0)), float(rng.uniform(0, 2 * math.pi))) for _ in PROBE_DEG)
+    elif case in ("two_modes", "two_modes_crack"):
+        mu, ratio = rng.uniform(0.5, 1.5), rng.uniform(1.3, 2.5)
+        kc = (rotor.m * (ratio * rotor.wn) ** 2 - k) / (1 + 1 / mu)
+        p = {"mu": mu, "ratio": ratio, "kc": kc, "e2": rotor.e * rng.uniform(0.5, 2.0),
+             "beta2": rng.uniform(0, 2 * math.pi)}
+        if case == "two_modes_crack":
+            p.update(D=rng.uniform(0.03, 0.06), psi=rng.uniform(0, math.pi))
     if psi_deg is not None and "psi" in p:
         p["psi"] = math.radians(psi_deg)
     return replace(rotor, p=p), daq
@@ -484,6 +549,13 @@ def describe_truth(rec: Record, xy: np.ndarray) -> dict:
                  text=f"q={p['q'] / r.k:.4f}k ({p['q'] / (r.c * r.wn):.2f} c wn)")
     elif rec.case == "gravity":
         d.update(static_deflection_um=p["load_N"] / r.k * 1e6, text=f"sag {p['load_N'] / r.k * 1e6:.0f} um")
+    elif rec.case in ("two_modes", "two_modes_crack"):
+        d.update(second_critical_rpm=r.fn * p["ratio"] * 60, mass_ratio=p["mu"],
+                 text=f"second mode {r.fn * p['ratio'] * 60:.0f} rpm ({p['ratio']:.2f} fn), mass ratio {p['mu']:.2f}")
+        if "D" in p:
+            d.update(D=p["D"] / (1 + p["mu"]), D_shaft=p["D"], axis_deg=deg(p["psi"]),
+                     text=d["text"] + f"; crack D={p['D']:.4f} (first mode D={p['D'] / (1 + p['mu']):.4f}) "
+                                      f"stiff axis {deg(p['psi']):.1f} deg")
     elif rec.case == "runout":
         d.update(runout=[(a, deg(b) % 360) for a, b in rec.runout],
                  text="runout " + ", ".join(f"{a:.1f} um @ {deg(b) % 360:.0f}" for a, b in rec.runout))
@@ -512,7 +584,7 @@ def _wrap(deg: float, period: float) -> float:
 def crack_comparison(case: str, truth: dict, params: dict) -> dict:
     """A named crack's size and axis against the truth (the axis from the notch in the
     direction of rotation)."""
-    if case == "asymmetry":
+    if case in ("asymmetry", "two_modes_crack"):
         if "asymmetry" in params:
             v = params["asymmetry"]["values"]
             D, ax, via = float(v["D"]), math.degrees(float(v.get("D_axis", 0.0))), "asymmetry"
@@ -637,8 +709,7 @@ def judge(case: str, truth: dict, d: dict, true_noise: float) -> dict:
             "right": bool(right), "missed": bool(missed), "wrong_named": extra,
             "said_undecidable": bool(missed) and any(e in undecidable for e in expected),
             "estimates": estimates(case, truth, params),
-            "crack_named_falsely": case not in ("asymmetry", "breathing_crack", "breathing_crack_side")
-            and any(c in named for c in CRACKS),
+            "crack_named_falsely": case not in CRACK_CASES and any(c in named for c in CRACKS),
             "crack": crack_comparison(case, truth, params), "parameters": params,
             "rejected": d.get("rejected"), "undecidable": d.get("undecidable"), "notes": d.get("notes")}
 
