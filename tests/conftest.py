@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import os
 
-# Before numpy loads its BLAS: one BLAS thread per process.  The suite runs in two xdist
-# workers on two cores (and the fault suite adds a pool of two); a multithreaded BLAS in
-# each oversubscribes the cores and its threads spin against each other (measured on the
-# fault suite: 367 s with the default threads, 133 s with one).
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+# Before numpy loads its BLAS and numba its thread pool: one thread per process.  The suite
+# runs in two xdist workers on two cores (and the fault suite adds a pool of two); a
+# multithreaded BLAS in each oversubscribes the cores and its threads spin against each other
+# (measured on the fault suite: 367 s with the default threads, 133 s with one), and so do two
+# output-error fits' parallel shooting loops (two rig diagnoses side by side: 513 s and 518 s
+# for what takes 30 s and 25 s alone).
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 from types import SimpleNamespace  # noqa: E402
