@@ -87,6 +87,8 @@ MAX_ADDED = 3
 #: fitted to convergence
 SCREEN_ITERATIONS = 2
 SCREEN_KEEP = 3
+#: Levenberg-Marquardt steps of a kept candidate's fit to convergence
+CONVERGE_ITERATIONS = 40
 #: the screening reads every other shooting segment when the record has at least this many
 #: (the ranking needs each candidate's fall, not its last digit; the candidates kept are
 #: fitted to convergence on every segment, and every decision is made on those fits)
@@ -516,14 +518,29 @@ def _screen(grid, model, effect, base_fit, x0=None):
     return best
 
 
-def _converge(grid, model, effect, screened, x0):
+def _converge(grid, model, effect, screened, x0, give_up_above=None):
     """The screened fit to convergence on every segment of ``grid`` (start states ``x0``: the
     model's fit's), its argument values (orientation, clearance) with it; ``None`` where it
-    fails."""
+    fails.  ``give_up_above``: the residual energy of the best candidate fitted so far -- a
+    fit that cannot come down to it stops (:func:`~.output_error.fit_output_error`), and is
+    fitted on only where a decision reads it (:func:`_to_convergence`)."""
     try:
-        return fit_output_error(grid, (*model, effect), {}, previous=screened, x0=x0, max_iter=40)
+        return fit_output_error(grid, (*model, effect), {}, previous=screened, x0=x0, max_iter=CONVERGE_ITERATIONS,
+                                give_up_above=give_up_above)
     except (FloatingPointError, np.linalg.LinAlgError, ValueError):
         return None
+
+
+def _to_convergence(fit: OutputErrorFit) -> OutputErrorFit:
+    """A fit that gave up (:attr:`~.output_error.OutputErrorFit.gave_up`) run on to
+    convergence, in the steps it had left; the fit itself otherwise or where that fails."""
+    if not fit.gave_up:
+        return fit
+    try:
+        return fit_output_error(fit.grid, fit.effects, {}, previous=fit, x0=fit.x0,
+                                max_iter=max(CONVERGE_ITERATIONS - fit.iterations, 1))
+    except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+        return fit
 
 
 def _physical_problem(fit: OutputErrorFit, effect: str, base: OutputErrorFit | None = None) -> str:
@@ -698,6 +715,8 @@ def diagnose_output_error(
         raise ValueError("the output-error diagnosis needs the probes' noise level (grid.noise_std)")
     floor = float(grid.noise_std)
 
+    from scipy.stats import chi2
+
     from ..progress import advance, step
 
     def say(msg: str) -> None:
@@ -761,16 +780,25 @@ def diagnose_output_error(
             keep.append("rub")
         step(f"waveforms, round {rnd}: the best candidates fitted to convergence", total=len(keep),
              unit="candidates")
+        best_rss = None
         for c in list(keep):
             advance()
-            full = _converge(grid, _with_side_load(cur_model, c, lib), c, fits[c], current.x0)
+            # best first (ranked): one that cannot come near the best so far gives up
+            # (beyond a tie with it: the 99 % chi-square point of its parameters, twice, and a
+            # thousandth of its residual, the crack_not_rub rule's margin)
+            level = (None if best_rss is None else best_rss * 1.001
+                     + 2.0 * float(chi2.ppf(0.99, len(fits[c].values))) * floor * floor)
+            full = _converge(grid, _with_side_load(cur_model, c, lib), c, fits[c], current.x0, level)
             if full is None:
                 del fits[c]
                 keep.remove(c)
                 say(f"round {rnd}: {c} diverged when fitted to convergence")
                 continue
             fits[c] = full
-            say(f"round {rnd}: {c} fitted (residual {fits[c].rms / floor:.3g}x the floor)")
+            if not full.gave_up:
+                best_rss = full.rss if best_rss is None else min(best_rss, full.rss)
+            say(f"round {rnd}: {c} fitted (residual {fits[c].rms / floor:.3g}x the floor)"
+                + (" -- gave up: it cannot come down to the best" if full.gave_up else ""))
         for c, full in _crack_laws_from_lead(grid, screen_grid, screen_x0, cur_model, lib, fits, keep,
                                              current).items():
             fits[c] = full
@@ -779,8 +807,9 @@ def diagnose_output_error(
             say(f"round {rnd}: {c} started from the best crack's side load and axis (residual "
                 f"{full.rms / floor:.3g}x the floor)")
         n = max(len(fits), 1)
-        round_rows = []
-        for c, f in fits.items():
+
+        def row_of(c, f, rnd=rnd, keep=keep, excess=excess, screen_rss=screen_rss, screen_excess=screen_excess,
+                   n=n, current=current):
             _, _, lp = f.wald(c)
             # a candidate screened out was fitted on the screening grid only: its fall there
             relevance = ((current.rss - f.rss) / excess if c in keep
@@ -796,8 +825,9 @@ def diagnose_output_error(
                 reason = f"significant, not relevant: removes {100 * relevance:.1f} % of the residual above the floor"
             else:
                 reason = _physical_problem(f, c, current)
-            row = Candidate(rnd, c, f.rms, lp, relevance, f.parameters(c), _intervals(f, c), not reason, reason)
-            round_rows.append(row)
+            return Candidate(rnd, c, f.rms, lp, relevance, f.parameters(c), _intervals(f, c), not reason, reason)
+
+        round_rows = [row_of(c, f) for c, f in fits.items()]
         # the best survivor by the Bayesian information criterion with the known noise level
         # (rss / sigma^2 + free parameters * ln N): a breathing crack that fits no better
         # than the open one it contains is not chosen over it
@@ -819,8 +849,18 @@ def diagnose_output_error(
         accepted = _simpler_crack_law_first(accepted, fits, floor)
         chosen = None
         for r in accepted:
+            if fits[r.effect].gave_up:
+                # the better candidates were turned down: this one is judged at its own optimum
+                fits[r.effect] = _to_convergence(fits[r.effect])
+                r2 = row_of(r.effect, fits[r.effect])
+                round_rows[round_rows.index(r)] = r2
+                if not r2.accepted:
+                    continue
+                r = r2
             if r.effect in CRACKS:
                 rub = fits.get("rub")
+                if rub is not None and rub.gave_up and rub.reachable <= fits[r.effect].rss * 1.001:
+                    rub = fits["rub"] = _to_convergence(rub)  # it might reach the crack: the rule reads it
                 if rub is not None and rub.rss <= fits[r.effect].rss * 1.001:
                     r.accepted, r.reason = False, ("rule crack_not_rub: the rub's own model explains the data at least "
                                                    f"as well (residual {rub.rms / floor:.3g}x vs "
@@ -839,6 +879,10 @@ def diagnose_output_error(
         for r in round_rows:
             if chosen is not None and r is not chosen and r.accepted:
                 r.accepted, r.reason = False, f"a better candidate in this round: {chosen.effect}"
+            f = fits.get(r.effect)
+            if f is not None and f.gave_up and r.effect in keep:
+                r.reason += (f" (its fit stopped after {f.iterations} steps: at its rate it could not come within a "
+                             "tie of the best candidate's residual; the figures are where it stopped)")
         tried.extend(round_rows)
         if chosen is None:
             break
