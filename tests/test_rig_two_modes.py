@@ -46,7 +46,9 @@ def two_modes(tmp_path_factory):
     pq.write_table(pa.table(cols), folder / "run.parquet")
     only_second = {**second, "kp": first["kp"]}
     pq.write_table(pa.table(only_second), folder / "second.parquet")
-    return (load_waveforms(folder / "run.parquet", rig), load_waveforms(folder / "second.parquet", rig))
+    pq.write_table(pa.table(first), folder / "first.parquet")
+    return (load_waveforms(folder / "run.parquet", rig), load_waveforms(folder / "second.parquet", rig),
+            load_waveforms(folder / "first.parquet", rig))
 
 
 def test_the_second_modes_1x_is_what_the_vectors_fit_of_it(two_modes):
@@ -55,7 +57,7 @@ def test_the_second_modes_1x_is_what_the_vectors_fit_of_it(two_modes):
     from rotor_env.diagnosis.from_vectors import diagnose_vectors
     from rotor_env.diagnosis.synchronous import SECOND_MODE, extra_mode_vectors
 
-    record, second = two_modes
+    record, second, _ = two_modes
     vd = diagnose_vectors(record.vectors((1,)), ip=0.0)
     assert SECOND_MODE in vd.missing
     extra = extra_mode_vectors(vd.after)
@@ -66,6 +68,39 @@ def test_the_second_modes_1x_is_what_the_vectors_fit_of_it(two_modes):
     assert extra_mode_vectors(diagnose_vectors(second.vectors((1,)), ip=0.0).after) is None
 
 
+def test_the_two_modes_roles_exchanged_hold_the_other_mode(two_modes):
+    """exchanged_modes: the same 1X fit with the rotor model on the other mode.  Its own
+    critical is the vectors' added one and the other way round (each within 0.5 %), it fits
+    the vectors as well (within 1 %), and the mode it now adds is the one the first fit held,
+    simulated alone and order-tracked the same way (within 2 % of its peak at every
+    revolution)."""
+    from rotor_env.diagnosis.from_rig import exchanged_modes, one_mode_band
+    from rotor_env.diagnosis.from_vectors import diagnose_vectors
+    from rotor_env.diagnosis.synchronous import extra_mode_vectors
+
+    record, second, first = two_modes
+    fit = diagnose_vectors(record.vectors((1,)), ip=0.0).after
+    swapped = exchanged_modes(fit)
+    assert swapped is not None
+    own, extra = fit.rotor_criticals[0]["rpm"], fit.extra_criticals[0]["rpm"]
+    assert swapped.rotor_criticals[0]["rpm"] == pytest.approx(extra, rel=5e-3)
+    assert swapped.extra_criticals[0]["rpm"] == pytest.approx(own, rel=5e-3)
+    assert swapped.rms <= 1.01 * fit.rms
+    # exchanged, the mode taken away is the one the vectors' model held: the lower one
+    # (simulated alone as ``first``) where it held the lower, else the higher
+    lower_is_own = own < extra
+    truth = (first if lower_is_own else second).vectors((1,))
+    peak = float(np.max(np.abs(truth.vectors[1])))
+    assert float(np.max(np.abs(extra_mode_vectors(swapped) - truth.vectors[1]))) < 0.02 * peak
+    # the band reaches from the model's own critical to the geometric mean with the other
+    # mode's natural frequency, on the side where that mode is
+    lo, hi = one_mode_band(swapped)
+    mean = math.sqrt(swapped.rotor_criticals[0]["rpm"] * swapped.extra_modes[0][0] / SPEED_UNITS["rpm"])
+    assert (lo, hi) == pytest.approx((mean, math.inf) if lower_is_own else (0.0, mean), rel=1e-9)
+    # a fit without an added mode has nothing to exchange
+    assert exchanged_modes(diagnose_vectors(first.vectors((1,)), ip=0.0).after) is None
+
+
 def test_a_1x_taken_away_leaves_no_1x(two_modes):
     """RigRecord.minus_1x: a mode's record less its own 1X vectors (``lead``, cubic between the
     revolutions) keeps under 0.2 % of the peak 1X away from its resonance (0.14 % measured,
@@ -74,7 +109,7 @@ def test_a_1x_taken_away_leaves_no_1x(two_modes):
     its own frequency -- why the diagnosis leaves that band out); a straight line between
     the revolutions left 2 % of a 46 um mode at 0.5 um noise.  A plain sign or convention
     error would leave twice the 1X."""
-    _, second = two_modes
+    _, second, _ = two_modes
     tab = second.vectors((1,))
     less = second.minus_1x(tab.t, {n: tab.vectors[1][:, j] for j, n in enumerate(tab.probes)}, "1X taken away")
     left = np.abs(less.vectors((1,)).vectors[1])
@@ -88,7 +123,7 @@ def test_a_1x_taken_away_leaves_no_1x(two_modes):
 
 
 def test_a_speed_band_is_one_stretch_of_the_record(two_modes):
-    record, _ = two_modes
+    record, _, _ = two_modes
     part = record.between_rpm(1000.0, 2000.0)
     assert 1000.0 <= part.rpm.min() and part.rpm.max() <= 2000.0
     assert np.all(np.diff(part.t) > 0) and len(part.t) > 0.25 * len(record.t)
@@ -104,7 +139,7 @@ def test_a_record_through_two_modes_is_explained_without_the_second(two_modes):
     fault.  A small library (two candidates) keeps the first, failing search short."""
     from rotor_env.diagnosis.from_rig import diagnose_rig
 
-    record, _ = two_modes
+    record, _, _ = two_modes
     d = diagnose_rig(record, candidates=("asymmetry", "shaft_bow"))
     out = d.to_dict()
     rpms = [c["rpm"] for c in out["criticals"]]
