@@ -156,3 +156,70 @@ def test_an_argument_held_at_a_value_is_read_back_where_it_was_held():
     values = held.parameters("asymmetry")
     assert values["D_axis"] == pytest.approx(0.5, abs=1e-12)
     assert values["D"] == pytest.approx(0.03, rel=0.05)
+
+
+def test_a_fit_that_cannot_reach_a_level_gives_up_and_says_how_low_it_could_go():
+    """``give_up_above``: a model that misses an effect (no crack on a cracked record) cannot
+    come down to the residual of the model that has it; its fit stops early, says so
+    (``gave_up``, ``reachable`` above the level), and its residual is no lower than where the
+    whole fit ends.  A level it can reach (its own optimum's) does not stop it."""
+    noise = 5e-4
+    m, thx, thy = _record({"D": 0.03, "D_axis": 0.5}, ("asymmetry",), noise=noise, seed=3)
+    grid = ShootingGrid.from_arrays(m.t, m.phi, m.phi_dot, thx, thy, 0.0, noise_std=noise)
+    start = {"unbalance": {"tau": 0.004, "beta": 0.2}, "viscous_damping": {"c": 0.04}}
+    right = fit_output_error(grid, ("unbalance", "viscous_damping", "asymmetry"), {**start, "asymmetry": {"D": 0.03}})
+    wrong = fit_output_error(grid, ("unbalance", "viscous_damping"), start)
+    assert wrong.rss > 4 * right.rss  # the crack is there
+    stopped = fit_output_error(grid, ("unbalance", "viscous_damping"), start, give_up_above=right.rss)
+    assert stopped.gave_up and not stopped.converged
+    assert stopped.iterations < wrong.iterations
+    assert stopped.reachable > right.rss
+    assert stopped.rss >= wrong.rss * (1 - 1e-9)
+    own = fit_output_error(grid, ("unbalance", "viscous_damping"), start, give_up_above=wrong.rss * 1.01)
+    assert not own.gave_up and own.converged and own.rss == pytest.approx(wrong.rss, rel=1e-9)
+
+
+def test_the_wald_test_against_a_value_is_the_test_against_zero_shifted():
+    """``OutputErrorFit.wald(effect, null=...)``: the HAC Wald statistic of the effect's
+    coefficients against given values; at the estimate itself it is zero, against zero it is
+    the plain test, and against any value it is ``(b - b0)' V^-1 (b - b0)`` (numpy's solve)."""
+    noise = 5e-4
+    m, thx, thy = _record({"D": 0.03, "D_axis": 0.5}, ("asymmetry",), noise=noise, seed=4)
+    grid = ShootingGrid.from_arrays(m.t, m.phi, m.phi_dot, thx, thy, 0.0, noise_std=noise)
+    f = fit_output_error(grid, ("unbalance", "viscous_damping", "asymmetry"),
+                         {"unbalance": {"tau": 0.005, "beta": 0.3}, "asymmetry": {"D": 0.03}})
+    idx = [i for i, (o, n) in enumerate(zip(f.owners, f.names, strict=True)) if o == "asymmetry" and n == "asymmetry.D"]
+    at = {f.names[i]: float(f.values[i]) for i in idx}
+    assert f.wald("asymmetry", null=at)[0] == pytest.approx(0.0, abs=1e-12)
+    zero = {n: 0.0 for n in at}
+    assert f.wald("asymmetry", null=zero) == pytest.approx(f.wald("asymmetry"))
+    b0 = {n: v * 0.9 for n, v in at.items()}
+    d = np.array([at[n] - b0[n] for n in at])
+    cov = f.covariance[np.ix_(idx, idx)]
+    w, q, lp = f.wald("asymmetry", null=b0)
+    assert q == len(idx)
+    assert w == pytest.approx(float(d @ np.linalg.solve(cov, d)), rel=1e-10)
+    assert lp == pytest.approx(stats.chi2.logsf(w, q) / math.log(10), rel=1e-6)
+
+
+def test_a_final_model_that_does_not_converge_is_run_on_and_said(monkeypatch):
+    """``oe_diagnosis._run_on``: a final fit stopped at its step limit is fitted on; where it
+    then converges it is taken (a lower residual) and nothing is said, where it still has
+    not (a step limit of one), a note says its intervals do not hold."""
+    from rotor_env.diagnosis import oe_diagnosis
+
+    noise = 5e-4
+    m, thx, thy = _record({}, (), noise=noise, seed=6)
+    grid = ShootingGrid.from_arrays(m.t, m.phi, m.phi_dot, thx, thy, 0.0, noise_std=noise)
+    cut = fit_output_error(grid, ("unbalance", "viscous_damping"),
+                           {"unbalance": {"tau": 0.003, "beta": 0.0}, "viscous_damping": {"c": 0.03}}, max_iter=1)
+    assert not cut.converged
+    notes: list[str] = []
+    on = oe_diagnosis._run_on(cut, noise, notes)
+    assert on.converged and on.rss < cut.rss and notes == []
+    monkeypatch.setattr(oe_diagnosis, "CONVERGE_ITERATIONS", 1)
+    worse = fit_output_error(grid, ("unbalance", "viscous_damping"),
+                             {"unbalance": {"tau": 0.002, "beta": -0.5}, "viscous_damping": {"c": 0.02}}, max_iter=1)
+    still = oe_diagnosis._run_on(worse, noise, notes)
+    assert not still.converged and still.rss <= worse.rss
+    assert len(notes) == 1 and "did not converge" in notes[0] and "do not hold" in notes[0]

@@ -531,6 +531,25 @@ def _converge(grid, model, effect, screened, x0, give_up_above=None):
         return None
 
 
+def _run_on(fit: OutputErrorFit, floor: float, notes: list[str]) -> OutputErrorFit:
+    """``fit`` (not converged) fitted on for :data:`CONVERGE_ITERATIONS` more steps; where it
+    still has not converged, a note says so."""
+    try:
+        more = fit_output_error(fit.grid, fit.effects, {}, previous=fit, x0=fit.x0, max_iter=CONVERGE_ITERATIONS)
+    except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+        more = None
+    if more is not None and more.rss <= fit.rss:
+        fit = more
+    if not fit.converged:
+        model = ", ".join(e for e in fit.effects if e != "stiffness")
+        notes.append(f"the final model's fit ({model}) did not converge in its step limit: its residual "
+                     f"({fit.rms / floor:.4g}x the floor) still falls and its parameters still move -- they are "
+                     "given where the fit stopped, and their intervals (from the curvature there) do not hold: "
+                     "this record does not determine them (a run that does not pass through a critical speed, or "
+                     "barely changes speed, holds too few numbers for the model)")
+    return fit
+
+
 def _to_convergence(fit: OutputErrorFit) -> OutputErrorFit:
     """A fit that gave up (:attr:`~.output_error.OutputErrorFit.gave_up`) run on to
     convergence, in the steps it had left; the fit itself otherwise or where that fails."""
@@ -904,6 +923,12 @@ def diagnose_output_error(
         cur_model = (*[e for e in cur_model if e in new_model], *[e for e in new_model if e not in cur_model])
         current = fits[chosen.effect]
         say(f"round {rnd}: {chosen.effect} added: residual {current.rms / floor:.3g}x the noise floor")
+    if not current.converged:
+        # the final model stopped at its step limit: run on once, and where it still moves
+        # say so -- its estimates are where it stopped, and intervals from the curvature there
+        # hold only near an optimum (a record at one speed, 1200-1210 rpm, crawls along a
+        # valley of stiffness, damping and unbalance: 1X at one speed holds two numbers)
+        current = _run_on(current, floor, notes)
     # one model for the whole record: is it the same rotor all through? (a crack that opens
     # above the critical barely lifts the residual, but the fit's scores drift at its onset)
     change = _constancy(current, floor, alpha)

@@ -124,7 +124,9 @@ class RigRecord:
         """The record without a 1X response that changes along it: ``vectors`` per channel of
         :meth:`vectors` (a probe, in the rig's unit, or ``tilt_u``/``tilt_v`` in urad; ``lead``:
         ``x = Re(X e^{i phi})``) at the times ``t`` (s, increasing), interpolated between them
-        and held beyond them; ``note`` says what was taken away."""
+        and held beyond them; ``note`` says what was taken away.  On a tilt rig the tilt is
+        changed and the probes' readings stay as recorded: a tilt does not say how the two
+        planes' translations shared it (the model, the vectors and the noise read the tilt)."""
         from scipy.interpolate import CubicSpline
 
         def at_samples(X: np.ndarray) -> np.ndarray:
