@@ -63,6 +63,10 @@ __all__ = ["RigDiagnosis", "diagnose_rig", "exchanged_modes", "one_mode_band"]
 
 #: the waveforms are fitted on the first mode's band only where it holds this many revolutions
 MIN_BAND_REVOLUTIONS = 50
+#: on a run with no critical speed in it, the waveforms' natural frequency and the 1X vectors'
+#: agree within this share (and four standard errors) where the record determines it (below
+#: the critical, 300-1400 rpm of a 1650 rpm rotor: 0.1 %)
+NATURAL_FREQUENCY_AGREEMENT = 0.1
 #: candidates not tried on a record less a second mode's fitted 1X response: their signature is
 #: a 1X alone (declared orders), and so is that fit's error -- a foreign two-disk record named
 #: a false shaft bow beside its crack there (1.025x the floor; the crack 9 % off; without the
@@ -249,12 +253,49 @@ class RigDiagnosis(Result):
         for e, t in self.vectors.undecidable.items():
             if e not in self.missing:
                 out[e] = f"{out[e]}; {t}" if e in out else t
+        check = self.natural_frequency_disagreement
+        if check:
+            out["natural_frequency"] = check
         if self.second_mode:
             for e in ONE_X_ONLY:
                 if e not in self.missing:
                     out[e] = (f"{e}: not tried on the record less the second mode's fitted 1X response (its "
                               "signature is a 1X alone, and so is what the 1X vectors' model of that mode leaves)")
         return out
+
+    @property
+    def natural_frequency_disagreement(self) -> str:
+        """The sentence where the two parts of the record disagree on the natural frequency:
+        the waveforms' (the time scale times ``sqrt(k)``) and the 1X vectors' more than
+        :data:`NATURAL_FREQUENCY_AGREEMENT` apart and more than four combined standard errors,
+        on a run with no critical speed in it -- then neither determines it (each interval is
+        read off a curvature that does not hold); ``""`` where they agree, the run passes a
+        critical, or they cannot be compared.  A run at one speed (1200-1210
+        rpm) holds one 1X vector: the waveforms' fit found 2492 rpm (+- 4 %) where the
+        vectors extrapolated 1612 rpm and the truth was 1650."""
+        d = self.diagnosis
+        if not isinstance(d, OutputErrorDiagnosis) or "stiffness.k" not in d.after.names:
+            return ""
+        fit = self.mode_fit if self.mode_fit is not None else self.vectors.after
+        if fit.rotor_criticals:
+            # through a critical both parts read it (a rub's contact or a crack's mean loss
+            # moves the vectors' simpler model by up to a tenth: physics, not a failure)
+            return ""
+        se_v = self.vectors.natural_frequency_se() if fit is self.vectors.after else None
+        k = d.after.value("stiffness.k")
+        se_k = float(d.after.std_errors[d.after.names.index("stiffness.k")])
+        if not (k > 0 and se_v is not None and math.isfinite(se_v) and math.isfinite(se_k)):
+            return ""
+        rpm = SPEED_UNITS["rpm"]
+        f_w, f_v = self.w_ref / rpm * math.sqrt(k), fit.w_ref / rpm
+        se_w = f_w * se_k / (2 * k)
+        z = abs(f_w - f_v) / max(math.hypot(se_w, se_v), 1e-300)
+        if abs(f_w / f_v - 1.0) <= NATURAL_FREQUENCY_AGREEMENT or z <= 4.0:
+            return ""
+        return (f"natural frequency: the waveforms and the 1X vectors disagree on it ({f_w:.0f} +- {1.96 * se_w:.0f} "
+                f"rpm against {f_v:.0f} +- {1.96 * se_v:.0f} rpm, {z:.0f} standard errors apart): this record does not "
+                "determine it, nor the model's stiffness, damping and unbalance, whatever their intervals say (a run "
+                "that barely changes speed, or stays far from the critical, holds too few numbers for them)")
 
     @property
     def changed_parts(self):
