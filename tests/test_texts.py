@@ -63,7 +63,10 @@ def test_rig_summary_gives_the_rms_in_the_rigs_unit():
     rig = SimpleNamespace(model="translation", amp_unit="um", to_metres=lambda v: v * 1e-6, source="rig.yaml")
     record = SimpleNamespace(rig=rig, source="run.csv", rpm=np.array([300.0, 3000.0]), notes=(),
                              t=np.array([0.0, 12.0]), phi=np.array([0.0, 2000.0]))
-    vectors = SimpleNamespace(to_dict=lambda: {"criticals": []}, summary=lambda: "1X summary", missing=(), undecidable={})
+    # the 1X vectors' fit passed the critical (the two parts' natural frequencies are not compared)
+    after = SimpleNamespace(rotor_criticals=[{"rpm": 1650.0, "damping_ratio": 0.025}], w_ref=172.8)
+    vectors = SimpleNamespace(to_dict=lambda: {"criticals": []}, summary=lambda: "1X summary", missing=(), undecidable={},
+                              after=after)
     rd = RigDiagnosis(record=record, vectors=vectors, diagnosis=diag, w_ref=172.8)
     text = rd.summary()
     assert text.splitlines()[1].startswith(f"VERDICT: {diag.verdict}")
