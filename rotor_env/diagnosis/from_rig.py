@@ -17,8 +17,10 @@
    vectors' verdict is shown under it as a part (criticals, damping, runout).
 
 **A record through two modes.**  The waveforms' model has one mode (two criticals where the
-supports split it).  Where it does not explain the record and the 1X vectors add another mode
-of the rotor and its supports (:data:`~.synchronous.SECOND_MODE`), the waveforms are
+supports split it).  Where it does not explain the record, or explains it only as two rotors
+either side of a break (a second resonance mid-run is a "change" to a one-mode model), and the
+1X vectors add another mode of the rotor and its supports (:data:`~.synchronous.SECOND_MODE`),
+the waveforms are
 diagnosed again without that mode's fitted 1X response (:func:`_without_second_mode`), and
 only on the speeds where the first mode carries the response: between the geometric means
 of its critical and its neighbours' natural frequencies, in the run or beyond it
@@ -30,8 +32,9 @@ foreign two-disk coast-down whose higher mode peaked higher: 1.77x the floor one
 crack named at 1.056x the other).  A candidate whose signature is a 1X alone (a bow,
 :data:`ONE_X_ONLY`) is not tried on such a record: what the 1X vectors' model of the mode
 taken away misses is a 1X too (that record named a false bow beside its crack).  A diagnosis
-is taken where it explains the record (the verdict then names ``second_mode``); else the first
-one stands, with a note.  Only
+is taken where it explains the record (the verdict then names ``second_mode``: one constant
+rotor with two modes is the simpler reading than two rotors); else the first one stands, with
+a note where it was not explained.  Only
 after the first fails: on one-mode rotors the vectors' second mode can stand in for an effect
 their model lacks (three misalignments and a rub of the rig suite's seeds 2 and 6), and those
 records the waveforms explain.  A two-disk rotor through 1964 and 3143 rpm: 4.8x the floor
@@ -327,7 +330,7 @@ class RigDiagnosis(Result):
         swapped = (" (the 1X vectors' fit with the roles of its two modes exchanged: with the other one the "
                    "waveforms were not explained)" if fit is not self.vectors.after else "")
         return (f"the 1X vectors find another mode of the rotor and its supports (critical {extra}), which the "
-                f"waveforms' one-mode model lacks (with the whole record it is not explained): the waveforms are "
+                f"waveforms' one-mode model lacks (over the whole record it does not explain one rotor): the waveforms are "
                 f"diagnosed without that mode's fitted 1X response, {where}{swapped}; {', '.join(ONE_X_ONLY)} "
                 "not tried there (what is left of the mode taken away is a 1X of its own)")
 
@@ -386,8 +389,12 @@ def diagnose_rig(
                                      progress=progress)
 
     plain = RigDiagnosis(record, vd, waveforms(record), w_ref)
-    if plain.verdict in ("explained", "explained_after_adding") or SECOND_MODE not in vd.missing:
+    explained = plain.verdict in ("explained", "explained_after_adding")
+    if SECOND_MODE not in vd.missing or (explained and plain.changed_parts is None):
         return plain
+    # not explained, or explained only as two rotors either side of a break: a second
+    # resonance mid-run is a "change" to a one-mode model, and the vectors found one -- one
+    # constant rotor with two modes is the simpler reading where it explains the record
     # the one-mode model does not explain the record and the 1X vectors hold another mode:
     # the record less that mode's 1X, on the band where the model's own mode carries the
     # response; where that is not explained either, the same with the two modes' roles
@@ -413,9 +420,15 @@ def diagnose_rig(
         alt = diagnose_output_error(grid, list(model), single, alpha=alpha, unit_scale=unit_scale, unit=unit,
                                     progress=progress)
         if alt.verdict in ("explained", "explained_after_adding"):
+            if explained:
+                without = replace(without, notes=(*without.notes, (
+                    "the one-mode waveforms explained this record only as two rotors, either side of a break; "
+                    "without the other mode the 1X vectors found, one rotor explains it")))
             return RigDiagnosis(without, vd, alt, fit_w, part if band is not None else None, band,
                                 second_mode=True, mode_fit=fit)
         tried.append(f"{alt.rms_ratio_after:.3g}x")
+    if explained:
+        return plain
     return RigDiagnosis(replace(record, notes=(*record.notes, (
         f"the 1X vectors find another mode of the rotor and its supports, which the waveforms' one-mode model "
         f"lacks; without its 1X response, on the band where the other mode carries the response, the waveforms "
