@@ -738,6 +738,18 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, m
     return status, pred, jac
 
 
+@njit(cache=True)
+def _segment_rows(r, jac, i0, i1):
+    """One segment's rows ``[J r]``: two channels per sample, the Jacobian's columns then the
+    residual."""
+    nf = jac.shape[2]
+    m = 2 * (i1 - i0)
+    A = np.empty((m, nf + 1))
+    A[:, :nf] = jac[i0:i1].reshape(m, nf)
+    A[:, nf] = r[i0:i1].reshape(m)
+    return A
+
+
 @njit(cache=True, parallel=True)
 def _reduced_normal_equations(r, jac, seg, npq):
     """Variable projection in normal-equation form: per segment ``G = Jx'Jx``,
@@ -753,11 +765,7 @@ def _reduced_normal_equations(r, jac, seg, npq):
     GiC = np.zeros((ns, 4, npq))
     Gic = np.zeros((ns, 4))
     for s in prange(ns):
-        i0, i1 = seg[s, 0], seg[s, 1] + 1
-        m = 2 * (i1 - i0)
-        A = np.empty((m, nf + 1))
-        A[:, :nf] = jac[i0:i1].reshape(m, nf)
-        A[:, nf] = r[i0:i1].reshape(m)
+        A = _segment_rows(r, jac, seg[s, 0], seg[s, 1] + 1)
         M = A.T @ A
         G = M[npq:nf, npq:nf].copy()
         C = M[npq:nf, :npq].copy()
@@ -788,11 +796,7 @@ def _project_rows(r, jac, seg, npq):
     rt = np.empty(start[ns])
     Jt = np.empty((start[ns], npq))
     for s in prange(ns):
-        i0, i1 = seg[s, 0], seg[s, 1] + 1
-        m = 2 * (i1 - i0)
-        A = np.empty((m, nf + 1))
-        A[:, :nf] = jac[i0:i1].reshape(m, nf)
-        A[:, nf] = r[i0:i1].reshape(m)
+        A = _segment_rows(r, jac, seg[s, 0], seg[s, 1] + 1)
         Jx = A[:, npq:nf].copy()
         P = A - Jx @ (np.linalg.pinv(Jx.T @ Jx) @ (Jx.T @ A))
         Jt[start[s]:start[s + 1]] = P[:, :npq]
