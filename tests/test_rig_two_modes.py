@@ -155,3 +155,26 @@ def test_a_record_through_two_modes_is_explained_without_the_second(two_modes):
     assert "another mode of the rotor and its supports (critical 2" in d.summary()
     # the change test's break is read on the part fitted, in the file's seconds
     assert out["change"]["t_s"] >= float(d.fitted.t[0]) and out["change"]["rpm"] <= hi
+
+
+def test_two_modes_are_preferred_to_two_rotors(two_modes, monkeypatch):
+    """A record the one-mode model explains only as two rotors either side of a break (here
+    the first diagnosis is made to say so: its parts explained), where the 1X vectors found
+    another mode, is diagnosed without that mode too; one constant rotor with two modes
+    explains it, and is taken, with a note saying what the first reading was."""
+    from types import SimpleNamespace
+
+    from rotor_env.diagnosis import from_rig
+
+    real = from_rig.RigDiagnosis.changed_parts
+
+    def changed_parts(self):
+        # the first, one-mode diagnosis: two rotors, each side explained
+        return SimpleNamespace(explained=True, appeared=[]) if not self.second_mode else real.fget(self)
+
+    monkeypatch.setattr(from_rig.RigDiagnosis, "changed_parts", property(changed_parts))
+    record, _, _ = two_modes
+    d = from_rig.diagnose_rig(record, candidates=("asymmetry",))
+    assert d.second_mode and d.missing == ["second_mode"], d.missing
+    assert d.diagnosis.rms_ratio_after < 1.05
+    assert any("only as two rotors" in n for n in d.record.notes)
