@@ -98,6 +98,11 @@ class RigDiagnosis(Result):
     mode_fit: VectorFit | None = None
 
     @property
+    def modes(self) -> VectorFit:
+        """The 1X fit whose modes the record was read with (:attr:`mode_fit`, else the vectors')."""
+        return self.mode_fit if self.mode_fit is not None else self.vectors.after
+
+    @property
     def unit_scale(self) -> float:
         """Dimensionless displacement -> the rig's reporting unit."""
         if self.record.rig.model != "translation":
@@ -279,7 +284,7 @@ class RigDiagnosis(Result):
         d = self.diagnosis
         if not isinstance(d, OutputErrorDiagnosis) or "stiffness.k" not in d.after.names:
             return ""
-        fit = self.mode_fit if self.mode_fit is not None else self.vectors.after
+        fit = self.modes
         if fit.rotor_criticals:
             # through a critical both parts read it (a rub's contact or a crack's mean loss
             # moves the vectors' simpler model by up to a tenth: physics, not a failure)
@@ -322,7 +327,7 @@ class RigDiagnosis(Result):
         """What the waveforms were fitted to, where the record holds a second mode."""
         if not self.second_mode:
             return ""
-        fit = self.mode_fit if self.mode_fit is not None else self.vectors.after
+        fit = self.modes
         extra = ", ".join(f"{c['rpm']:.0f} rpm" for c in fit.extra_criticals) or "outside the run"
         own = ", ".join(f"{c['rpm']:.0f} rpm" for c in fit.rotor_criticals)
         where = (f"from {self.fitted.rpm.min():.0f} to {self.fitted.rpm.max():.0f} rpm, where the mode of critical "
@@ -383,23 +388,22 @@ def diagnose_rig(
     unit_scale = (LENGTH_UNIT / record.rig.to_metres(1.0)) if record.rig.model == "translation" else 1e6
     unit = record.rig.amp_unit if record.rig.model == "translation" else "urad"
 
-    def waveforms(rec: RigRecord) -> OutputErrorDiagnosis:
-        grid, _ = waveform_grid(rec, w_ref)
-        return diagnose_output_error(grid, list(model), cands, alpha=alpha, unit_scale=unit_scale, unit=unit,
+    def waveforms(rec: RigRecord, w: float = w_ref, tried: Sequence[str] = cands) -> OutputErrorDiagnosis:
+        grid, _ = waveform_grid(rec, w)
+        return diagnose_output_error(grid, list(model), list(tried), alpha=alpha, unit_scale=unit_scale, unit=unit,
                                      progress=progress)
 
     plain = RigDiagnosis(record, vd, waveforms(record), w_ref)
     explained = plain.verdict in ("explained", "explained_after_adding")
     if SECOND_MODE not in vd.missing or (explained and plain.changed_parts is None):
         return plain
-    # not explained, or explained only as two rotors either side of a break: a second
-    # resonance mid-run is a "change" to a one-mode model, and the vectors found one -- one
-    # constant rotor with two modes is the simpler reading where it explains the record
-    # the one-mode model does not explain the record and the 1X vectors hold another mode:
-    # the record less that mode's 1X, on the band where the model's own mode carries the
+    # not explained, or explained only as two rotors either side of a break (a second
+    # resonance mid-run is a "change" to a one-mode model), and the vectors found another
+    # mode: the record less that mode's 1X, on the band where the model's own mode carries the
     # response; where that is not explained either, the same with the two modes' roles
     # exchanged (the vectors' start model follows the highest peak, which need not be the
-    # mode the waveforms' one-mode model can hold)
+    # mode the waveforms' one-mode model can hold).  One constant rotor with two modes is the
+    # simpler reading where it explains the record.
     single = [c for c in cands if c not in ONE_X_ONLY]
     tried = []
     for fit in (vd.after, exchanged_modes(vd.after)):
@@ -416,9 +420,7 @@ def diagnose_rig(
             if (part.phi[-1] - part.phi[0]) / (2 * math.pi) < MIN_BAND_REVOLUTIONS:
                 part, band = without, None
         fit_w = w_ref if fit is vd.after else fit.w_ref
-        grid, _ = waveform_grid(part, fit_w)
-        alt = diagnose_output_error(grid, list(model), single, alpha=alpha, unit_scale=unit_scale, unit=unit,
-                                    progress=progress)
+        alt = waveforms(part, fit_w, single)
         if alt.verdict in ("explained", "explained_after_adding"):
             if explained:
                 without = replace(without, notes=(*without.notes, (

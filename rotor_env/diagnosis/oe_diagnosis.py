@@ -531,13 +531,19 @@ def _converge(grid, model, effect, screened, x0, give_up_above=None):
         return None
 
 
+def _fit_on(fit: OutputErrorFit, steps: int) -> OutputErrorFit | None:
+    """``fit``'s model fitted on from where it stopped, for at most ``steps`` steps; ``None``
+    where that fails."""
+    try:
+        return fit_output_error(fit.grid, fit.effects, {}, previous=fit, x0=fit.x0, max_iter=max(steps, 1))
+    except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+        return None
+
+
 def _run_on(fit: OutputErrorFit, floor: float, notes: list[str]) -> OutputErrorFit:
     """``fit`` (not converged) fitted on for :data:`CONVERGE_ITERATIONS` more steps; where it
     still has not converged, a note says so."""
-    try:
-        more = fit_output_error(fit.grid, fit.effects, {}, previous=fit, x0=fit.x0, max_iter=CONVERGE_ITERATIONS)
-    except (FloatingPointError, np.linalg.LinAlgError, ValueError):
-        more = None
+    more = _fit_on(fit, CONVERGE_ITERATIONS)
     if more is not None and more.rss <= fit.rss:
         fit = more
     if not fit.converged:
@@ -555,11 +561,7 @@ def _to_convergence(fit: OutputErrorFit) -> OutputErrorFit:
     convergence, in the steps it had left; the fit itself otherwise or where that fails."""
     if not fit.gave_up:
         return fit
-    try:
-        return fit_output_error(fit.grid, fit.effects, {}, previous=fit, x0=fit.x0,
-                                max_iter=max(CONVERGE_ITERATIONS - fit.iterations, 1))
-    except (FloatingPointError, np.linalg.LinAlgError, ValueError):
-        return fit
+    return _fit_on(fit, CONVERGE_ITERATIONS - fit.iterations) or fit
 
 
 def _physical_problem(fit: OutputErrorFit, effect: str, base: OutputErrorFit | None = None) -> str:
@@ -617,9 +619,15 @@ def _gap(fit: OutputErrorFit, other: OutputErrorFit, floor: float) -> tuple[floa
     """How much more residual energy ``fit`` leaves than ``other``, in units of the noise
     variance (both fits see the same noise, so it cancels), and the level within which the two
     tie: the 99 % point of a chi-square with ``fit``'s parameter count."""
+    return (fit.rss - other.rss) / (floor * floor), _tie_level(len(fit.values))
+
+
+def _tie_level(n_parameters: int) -> float:
+    """Two fits of the same data tie within this much residual energy, in units of the noise
+    variance: the 99 % point of a chi-square with the fit's parameter count."""
     from scipy.stats import chi2
 
-    return (fit.rss - other.rss) / (floor * floor), float(chi2.ppf(0.99, len(fit.values)))
+    return float(chi2.ppf(0.99, n_parameters))
 
 
 def _simpler_crack_law_first(accepted: list[Candidate], fits: dict, floor: float) -> list[Candidate]:
@@ -734,8 +742,6 @@ def diagnose_output_error(
         raise ValueError("the output-error diagnosis needs the probes' noise level (grid.noise_std)")
     floor = float(grid.noise_std)
 
-    from scipy.stats import chi2
-
     from ..progress import advance, step
 
     def say(msg: str) -> None:
@@ -806,7 +812,7 @@ def diagnose_output_error(
             # (beyond a tie with it: the 99 % chi-square point of its parameters, twice, and a
             # thousandth of its residual, the crack_not_rub rule's margin)
             level = (None if best_rss is None else best_rss * 1.001
-                     + 2.0 * float(chi2.ppf(0.99, len(fits[c].values))) * floor * floor)
+                     + 2.0 * _tie_level(len(fits[c].values)) * floor * floor)
             full = _converge(grid, _with_side_load(cur_model, c, lib), c, fits[c], current.x0, level)
             if full is None:
                 del fits[c]

@@ -120,12 +120,11 @@ OUTPUT_TERMS = ("offset_x", "offset_y", "runout_cos", "runout_sin",
                 "runout2_x_cos", "runout2_x_sin", "runout2_y_cos", "runout2_y_sin",
                 "runout_back_cos", "runout_back_sin")
 N_OFFSETS = len(OUTPUT_TERMS)
-#: forward-difference step for A = df/dx (relative to 1 + |x|) and for the arguments
 #: a fit with a ``give_up_above`` stops where, at its last step's fall, it would need this
 #: many times the steps left to come down to that level (the steps of a Levenberg-Marquardt
 #: fit that crawls along a valley fall less and less, never more by ten)
 GIVE_UP_MARGIN = 10.0
-
+#: forward-difference step for A = df/dx (relative to 1 + |x|) and for the arguments
 _FD_STATE = 1e-7
 _FD_ARG = 1e-6
 
