@@ -7,8 +7,10 @@ Prints one Markdown table with ratios: throughput of the identifier alone and en
 fitted, wall = start-up + samples / rate, so the rate is the slope and the start-up the
 intercept), SI rig streaming (``--rig``: keyphasor, decimation, rates, then the monitor),
 memory against stream length, detection delay (median, 90th
-percentile over noise seeds) for a crack appearing at t = 250 (D 0 -> 0.04, 0 -> 0.02)
-and a growing crack (D = 0.0008 (t - 250)), and false alarms per 1e6 samples on healthy
+percentile over noise seeds), the effect named and the value after it for a crack appearing
+at t = 250 (D 0 -> 0.04, 0 -> 0.02), a growing crack (D = 0.0008 (t - 250)) and a balance
+weight lost at t = 250 (the unbalance's 1X forcing steps, as a crack's does on a
+synchronous orbit), and false alarms per 1e6 samples on healthy
 rotors of three parameter sets, against the target ARL0 and against the peer: a plain
 CUSUM on the residual (the block's prediction-error energy of the same identified
 model, standardised by its in-control variance, same Gaussian CUSUM and ARL0 design).
@@ -33,7 +35,14 @@ from scipy import stats
 from rotor_env.measurements.stream import read_ahead
 from rotor_env.monitor import Monitor, StreamReader
 from rotor_env.monitor.detector import CusumDesign
-from rotor_env.monitor.scenarios import HEALTHY_ROTORS, delay, growing_crack, healthy, with_crack
+from rotor_env.monitor.scenarios import (
+    HEALTHY_ROTORS,
+    delay,
+    growing_crack,
+    healthy,
+    unbalance_step,
+    with_crack,
+)
 from rotor_env.regression import build_rows
 
 NOISE = 5e-4
@@ -244,26 +253,35 @@ def main() -> None:
     rows.append(("peak memory (tracemalloc) for 40 k / 160 k / 640 k samples",
                  " / ".join(f"{m:.1f} MB" for _, m in mem), f"{mem[-1][1] / mem[0][1]:.2f}x for 16x the stream"))
 
-    # detection delay
-    cases = {
-        "crack appears at 250, D 0 -> 0.04": with_crack(0.0, 0.04),
-        "crack appears at 250, D 0 -> 0.02": with_crack(0.0, 0.02),
-        "crack grows from 250, D = 0.0008 (t - 250)": growing_crack(0.0008),
+    # detection delay, the effect named, and the value after it (from the deciding block)
+    ub = HEALTHY_ROTORS["table1"]["tau"] * np.exp(1j * HEALTHY_ROTORS["table1"]["beta"])
+    cases = {  # name: (stream, the effect that changed, its true value after, how a value is read)
+        "crack appears at 250, D 0 -> 0.04": (with_crack(0.0, 0.04), "asymmetry", 0.04, lambda v: v["D"]),
+        "crack appears at 250, D 0 -> 0.02": (with_crack(0.0, 0.02), "asymmetry", 0.02, lambda v: v["D"]),
+        "crack grows from 250, D = 0.0008 (t - 250)": (growing_crack(0.0008), "asymmetry", None, None),
+        "balance weight lost at 250, unbalance + 0.005 at 90 deg": (
+            unbalance_step(0.005, math.pi / 2), "unbalance", ub + 0.005j,
+            lambda v: v["tau"] * np.exp(1j * v["beta"])),
     }
-    for name, clean in cases.items():
-        d_mon, d_peer, wrong = [], [], 0
+    for name, (clean, effect, truth, read) in cases.items():
+        d_mon, d_peer, wrong, errors = [], [], 0, []
         for seed in range(args.seeds):
             data = clean.with_noise(NOISE, seed=seed).data
             mon = Monitor(arl0=args.arl0)
             ev = [e for e in mon.update(data) if e["event"] != "status"]
-            wrong += sum(e["effect"] != "asymmetry" or e["t_alarm"] < 250.0 for e in ev)
-            d_mon.append(delay(ev, "asymmetry", 250.0))
+            wrong += sum(e["effect"] != effect or e["t_alarm"] < 250.0 for e in ev)
+            d_mon.append(delay(ev, effect, 250.0))
+            first = next((e for e in ev if e["effect"] == effect and e["t_alarm"] >= 250.0), None)
+            if truth is not None and first is not None:
+                errors.append(abs(read(first["value_after"]) - truth) / abs(truth))
             peer = [t for t in plain_residual_cusum(data, 0.3, args.arl0) if t >= 250.0]
             d_peer.append(peer[0] - 250.0 if peer else math.inf)
         med, p90 = np.median(d_mon), np.percentile(d_mon, 90)
         pmed, pp90 = np.median(d_peer), np.percentile(d_peer, 90)
+        size = (f"; value after: error median {100 * np.median(errors):.1f} %, max {100 * np.max(errors):.1f} %"
+                if errors else "")
         rows.append((f"delay, {name} ({args.seeds} seeds)", f"median {med:.1f}, p90 {p90:.1f} time units "
-                     f"({med / 0.02:.0f} samples); wrong or early alarms {wrong}",
+                     f"({med / 0.02:.0f} samples); wrong, unattributed or early alarms {wrong}{size}",
                      f"peer (plain residual CUSUM): median {pmed:.1f}, p90 {pp90:.1f}: {pmed / med:.2f}x slower; "
                      "the peer names no effect"))
 

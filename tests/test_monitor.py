@@ -16,9 +16,16 @@ from scipy import stats
 from rotor_env.measurements.files import MeasurementError, load_measurements
 from rotor_env.measurements.stream import read_ahead
 from rotor_env.monitor import Monitor, StreamReader, cusum_threshold, simulate_arl
+from rotor_env.monitor import kernel as K
 from rotor_env.monitor.detector import chi2_sf, norm_ppf
 from rotor_env.monitor.kernel import downdate_row
-from rotor_env.monitor.scenarios import HEALTHY_ROTORS, growing_crack, healthy, with_crack
+from rotor_env.monitor.scenarios import (
+    HEALTHY_ROTORS,
+    growing_crack,
+    healthy,
+    unbalance_step,
+    with_crack,
+)
 
 NOISE = 5e-4
 
@@ -57,6 +64,73 @@ def test_crack_appearing_is_asymmetry_at_the_right_time(crack_04):
         assert [(e["event"], e["effect"]) for e in ev] == [("appeared", "asymmetry")]
         assert 246.0 <= ev[0]["t_onset"] <= 250.0 <= ev[0]["t_alarm"] <= 256.0
         assert ev[0]["value_before"]["D"] == pytest.approx(0.0, abs=0.003)
+        # the value after from the deciding block, wholly after the step (truth 0.04)
+        assert ev[0]["value_after"]["D"] == pytest.approx(0.04, abs=0.003)
+        assert ev[0]["evidence"]["detected_by"] == "asymmetry"
+
+
+@pytest.mark.parametrize(("rotor", "dtau", "angle"), [("table1", 0.005, 0.0), ("light", 0.005, 0.7),
+                                                      ("heavy", 0.01, -2.0)])
+def test_a_lost_balance_weight_is_named_unbalance_with_its_new_value(rotor, dtau, angle):
+    # a 1X forcing that steps at t = 250 (a test-only effect beside the rotor's unbalance):
+    # on a synchronous orbit a crack's step is one too, and the isolation must tell them
+    # apart where the data can; the truth is the sum of the two unbalances
+    r = HEALTHY_ROTORS[rotor]
+    before = r["tau"] * np.exp(1j * r["beta"])
+    after = before + dtau * np.exp(1j * angle)
+    mon = Monitor(ip=r["ip"])
+    ev = [e for e in mon.update(unbalance_step(dtau, angle, rotor=rotor).with_noise(NOISE, seed=4).data)
+          if e["event"] != "status"]
+    assert [(e["event"], e["effect"]) for e in ev] == [("changed", "unbalance")]
+    e = ev[0]
+    assert 250.0 <= e["t_alarm"] <= 262.0
+    assert e["value_before"]["tau"] == pytest.approx(abs(before), rel=0.02)
+    assert e["value_after"]["tau"] == pytest.approx(abs(after), rel=0.03)
+    assert abs(np.angle(np.exp(1j * (e["value_after"]["beta"] - np.angle(after))))) < 0.05
+    iso = e["evidence"]["isolation"]
+    assert max(iso, key=iso.get) == "unbalance"
+
+
+def test_isolation_names_one_effect_only_beyond_the_margin():
+    # the rule on a hand-made event row: each effect's explained energy (in the noise's
+    # variance) less its parameter count is its score; candidates lie within the 99 % point
+    # of chi2(q_best + q_h) of the best; a block whose best is below chi2(q_best)'s 99 %
+    # point leaves the CUSUM's own attribution
+    mon = Monitor()
+    G, qm = mon._cols.shape
+    q = dict(zip(mon.effects, mon._q, strict=True))
+    width = K.N_EV_FIXED + 4 * qm + K.isolation_width(G, qm)
+
+    def row(detected_by: str, scores: dict[str, float]) -> np.ndarray:
+        r = np.zeros(width)
+        r[K.V_G] = mon.effects.index(detected_by)
+        r[K.V_LONG_RUN] = r[K.V_KAPPA] = 1.0
+        r[K.V_CHI], r[K.V_DOF], r[K.V_BLOCKS] = 50.0, 4.0, 2.0  # the CUSUM's evidence (unused by the rule)
+        for h, name in enumerate(mon.effects):
+            o = K.N_EV_FIXED + 4 * qm + h * (1 + 4 * qm)
+            r[o] = scores.get(name, 0.0) + q[name]
+            r[o + 1 + qm : o + 1 + 2 * qm] = 1e-6  # the reference's errors
+            r[o + 1 + 3 * qm : o + 1 + 4 * qm] = 1e-6
+        return r
+
+    margin = stats.chi2.ppf(0.99, q["unbalance"] + q["asymmetry"])
+    near = mon._event(row("unbalance", {"unbalance": 1400.0, "asymmetry": 1400.0 - 0.9 * margin}))
+    assert near["event"] == "unattributed" and near["effect"] is None
+    assert near["candidates"] == ["unbalance", "asymmetry"]
+    assert set(near["value_after"]) == {"unbalance", "asymmetry"}
+    # in words (the command's lines and the live view): both, each with its values
+    from rotor_env.monitor.core import alarm_words
+    from rotor_env.monitor.live import _alarm_line
+
+    assert alarm_words(near).startswith("unbalance or asymmetry")
+    line = _alarm_line(near)
+    assert "unbalance: tau = " in line and "asymmetry: D = " in line
+    far = mon._event(row("unbalance", {"unbalance": 1400.0 - 1.1 * margin, "asymmetry": 1400.0}))
+    assert (far["event"], far["effect"]) == ("appeared", "asymmetry")
+    assert far["evidence"]["detected_by"] == "unbalance"
+    weak = stats.chi2.ppf(0.99, q["asymmetry"])
+    own = mon._event(row("unbalance", {"unbalance": 0.9 * weak, "asymmetry": 0.9 * weak}))
+    assert own["effect"] == "unbalance" and "candidates" not in own
 
 
 def test_crack_growing_is_followed():

@@ -105,7 +105,7 @@ class RigClock:
             e["rpm"] = self.rpm(e["speed"])
             if kind == "summary":
                 e["events"] = [self.annotate(x) for x in e.get("events", [])]
-        elif kind in ("appeared", "changed", "disappeared"):
+        elif kind in ("appeared", "changed", "disappeared", "unattributed"):  # the monitor's ALARM_EVENTS
             e["t_alarm_s"] = self.seconds(e["t_alarm"])
             e["t_onset_s"] = self.seconds(e["t_onset"])
             ev = e.get("evidence", {})

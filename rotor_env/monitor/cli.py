@@ -205,6 +205,7 @@ class _StreamConfig:
 def _run_many(args: argparse.Namespace, rig) -> int:
     """Several streams: one Ray task each (:mod:`rotor_env.monitor.fleet`), JSON lines or a
     line per event; a table of the streams at the end."""
+    from .core import ALARM_EVENTS, alarm_words
     from .fleet import monitor_streams
 
     refused = [o for o, v in (("--report", args.report), ("--state", args.state), ("--resume", args.resume)) if v]
@@ -219,10 +220,10 @@ def _run_many(args: argparse.Namespace, rig) -> int:
     def emit(event: dict) -> None:
         if args.json_lines:
             print(json.dumps(event), flush=True)
-        elif event["event"] in ("appeared", "changed", "disappeared", "error"):
+        elif event["event"] in (*ALARM_EVENTS, "error"):
             t = event.get("t_alarm_s", event.get("t_alarm"))
             unit = " s" if "t_alarm_s" in event else ""
-            what = event.get("effect") or event.get("message")
+            what = alarm_words(event) if event["event"] in ALARM_EVENTS else event.get("message")
             when = f" at t = {t:.6g}{unit}" if t is not None else ""
             print(f"{event['stream']}: {event['event']} {what}{when}", flush=True)
 
@@ -236,7 +237,7 @@ def _run_many(args: argparse.Namespace, rig) -> int:
         print("\n| stream | samples | alarms | events | error |\n|---|---|---|---|---|")
         for r in results:
             s = r["summary"] or {}
-            evs = ", ".join(f"{e['event']} {e['effect']} (t {e['t_alarm']:.6g})" for e in s.get("events", []))
+            evs = ", ".join(f"{e['event']} {alarm_words(e)} (t {e['t_alarm']:.6g})" for e in s.get("events", []))
             print(f"| {r['stream']} | {s.get('samples', 0)} | {s.get('alarms', 0)} | {evs or '—'} | "
                   f"{r['error'] or ''} |")
     return 2 if any(r["error"] for r in results) else 0

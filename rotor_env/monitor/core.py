@@ -40,12 +40,23 @@ from ..regression import DEFAULT_EFFECTS, build_rows
 from . import kernel as K
 from .detector import CusumDesign
 
-__all__ = ["ALARM_EVENTS", "Monitor", "MonitorConfig", "interrupts_held"]
+__all__ = ["ALARM_EVENTS", "Monitor", "MonitorConfig", "alarm_words", "interrupts_held"]
 
 _STATE_VERSION = 1
 #: the kinds of event an alarm raises (the others: "status", "summary", "error")
-ALARM_EVENTS = ("appeared", "changed", "disappeared")
+ALARM_EVENTS = ("appeared", "changed", "disappeared", "unattributed")
+#: the isolation's level: the deciding block must carry the change at this level, and an
+#: effect whose own change explains the block within this level's margin of the best is a
+#: candidate too (detector module docstring, *Isolation*)
+ISOLATION_ALPHA = 0.01
 _N_COLS = len(COLUMNS)
+
+
+def alarm_words(event: dict) -> str:
+    """What an alarm names: its effect, or the effects the data could not tell apart."""
+    if event.get("effect") is None and event.get("candidates"):
+        return " or ".join(event["candidates"]) + " (which, the block cannot tell)"
+    return str(event.get("effect"))
 
 
 @contextlib.contextmanager
@@ -282,7 +293,8 @@ class Monitor:
         a = self._arrays
         X, y = build_rows(self.core.spec, np.ascontiguousarray(data), self.core.ip)
         est = self.core.estimator
-        events = np.zeros((data.shape[0] // self.config.block, K.N_EV_FIXED + 4 * self._cols.shape[1]))
+        events = np.zeros((data.shape[0] // self.config.block,
+                           K.N_EV_FIXED + 4 * self._cols.shape[1] + K.isolation_width(*self._cols.shape)))
         n_ev = K.process_blocks(
             data, X, y, self.core.spec.rows_per_sample, est.R, est._col_sq, est._sums, self.core._masks,
             self._cols, self._scales, self._cfg, a["gamma"], a["mon"], a["eff"], a["on_before"], a["on_se"],
@@ -300,55 +312,104 @@ class Monitor:
             full[eff.coefficients.index(c)] = v
         return {k: float(v) for k, v in eff.from_coefficients(full).items()}
 
-    def _event(self, row: np.ndarray) -> dict:
-        g = int(row[K.V_G])
-        q = int(self._q[g])
-        qm = self._cols.shape[1]
-        o = K.N_EV_FIXED
-        before, se_before = row[o : o + q], row[o + qm : o + qm + q]
-        delta, se_delta = row[o + 2 * qm : o + 2 * qm + q], row[o + 3 * qm : o + 3 * qm + q]
-        after = before + delta
-        se_after = np.sqrt(se_before**2 + se_delta**2)
+    def _isolation(self, row: np.ndarray) -> tuple[list[int], dict[str, float]]:
+        """The effects whose change alone explains the deciding block (module docstring of
+        :mod:`rotor_env.monitor.detector`, *Isolation*): ``(candidates, score per effect)``,
+        best first; no candidates where the block alone decides nothing."""
+        G, qm = self._cols.shape
+        o = K.N_EV_FIXED + 4 * qm
+        # the energy each explains, in the noise's variance: less what noise alone would
+        score = np.array([row[o + h * (1 + 4 * qm)] for h in range(G)]) - self._q
+        scores = {e: float(v) for e, v in zip(self.effects, score, strict=True) if np.isfinite(v)}
+        if not scores:
+            return [], scores
+        best = int(np.nanargmax(score))
+        if not score[best] > stats.chi2.ppf(1.0 - ISOLATION_ALPHA, self._q[best]):
+            return [], scores  # the change built up over blocks: the CUSUM's own attribution stands
+        near = [h for h in range(G) if np.isfinite(score[h])
+                and score[h] >= score[best] - stats.chi2.ppf(1.0 - ISOLATION_ALPHA, self._q[best] + self._q[h])]
+        return sorted(near, key=lambda h: -score[h]), scores
+
+    def _kind(self, g: int, before: np.ndarray, se_before: np.ndarray, after: np.ndarray,
+              se_after: np.ndarray) -> str:
         # before: present when its coefficients differ from 0 by more than 3 standard
         # errors; a change from nothing is an appearance.  After: gone when within 3
         # standard errors of 0 or below 5 % of the size its plausible bounds allow (what
         # the errors in the regressors can leave behind is not an effect)
         relevant = 0.05 * self._scales[g]
-        present_before = bool(np.any(np.abs(before) > 3.0 * se_before))
-        present_after = bool(np.any(np.abs(after) > np.maximum(3.0 * se_after, relevant)))
-        if not present_before:
-            kind = "appeared"
-        elif not present_after:
-            kind = "disappeared"
-        else:
-            kind = "changed"
-        name = self.effects[g]
-        eff = EFFECTS[name]
-        cols = self.core.spec.groups[name]
-        return {
-            "event": kind,
-            "effect": name,
-            "t_alarm": float(row[K.V_T]),
-            "t_onset": float(row[K.V_T_ONSET]),
-            "value_before": self._physical(g, before),
-            "value_after": self._physical(g, after),
-            "evidence": {
-                "cusum": float(row[K.V_S]),
-                "threshold": float(self.threshold),
-                "blocks": int(row[K.V_BLOCKS]),
-                "chi2": float(row[K.V_CHI]),
-                "dof": int(row[K.V_DOF]),
-                "log10_p": float(chi2_log10_sf(float(row[K.V_CHI]), int(row[K.V_DOF]))),
-                "calibration": float(row[K.V_KAPPA]),
+        if not np.any(np.abs(before) > 3.0 * se_before):
+            return "appeared"
+        if not np.any(np.abs(after) > np.maximum(3.0 * se_after, relevant)):
+            return "disappeared"
+        return "changed"
+
+    def _event(self, row: np.ndarray) -> dict:
+        g = int(row[K.V_G])
+        qm = self._cols.shape[1]
+        o = K.N_EV_FIXED
+        candidates, scores = self._isolation(row)
+        q = int(self._q[g])
+        onset = (row[o : o + q], row[o + qm : o + qm + q])
+        one = []
+        for h in candidates or [g]:
+            qh = int(self._q[h])
+            oh = o + 4 * qm + h * (1 + 4 * qm) + 1
+            if candidates:
+                # the effect's own change fitted to the deciding block, which lies wholly after
+                # the change (the CUSUM's sums also hold the block that straddles it): the
+                # value after is the reference there plus that change
+                ref, se_ref = row[oh : oh + qh], row[oh + qm : oh + qm + qh]
+                after = ref + row[oh + 2 * qm : oh + 2 * qm + qh]
+                se_after = np.hypot(se_ref, row[oh + 3 * qm : oh + 3 * qm + qh])
+                before, se_before = onset if h == g else (ref, se_ref)
+                se_delta = se_after  # the reference's error there counts, as the block's
+            else:  # the change built up over the CUSUM's blocks: its own sums
+                before, se_before = onset
+                after = before + row[o + 2 * qm : o + 2 * qm + q]
+                se_delta = row[o + 3 * qm : o + 3 * qm + q]
+                se_after = np.hypot(se_before, se_delta)
+            one.append((h, before, se_before, after, se_after, se_delta))
+        found = []
+        for h, before, se_before, after, se_after, se_delta in one:
+            delta = after - before
+            name = self.effects[h]
+            cols = self.core.spec.groups[name]
+            found.append({
+                "event": self._kind(h, before, se_before, after, se_after),
+                "effect": name,
+                "value_before": self._physical(h, before),
+                "value_after": self._physical(h, after),
                 "coefficients_before": dict(zip(cols, map(float, before), strict=True)),
                 "change": dict(zip(cols, map(float, delta), strict=True)),
                 "change_se": dict(zip(cols, map(float, se_delta), strict=True)),
-                "speed_onset": float(row[K.V_SPEED_ONSET]),
-                "speed_alarm": float(row[K.V_SPEED]),
-                "orders": list(eff.orders),
-                "signature": eff.signature,
-            },
+                "orders": list(EFFECTS[name].orders),
+                "signature": EFFECTS[name].signature,
+            })
+        evidence = {
+            "cusum": float(row[K.V_S]),
+            "threshold": float(self.threshold),
+            "detected_by": self.effects[g],
+            "blocks": int(row[K.V_BLOCKS]),
+            "chi2": float(row[K.V_CHI]),
+            "dof": int(row[K.V_DOF]),
+            "log10_p": float(chi2_log10_sf(float(row[K.V_CHI]), int(row[K.V_DOF]))),
+            "calibration": float(row[K.V_KAPPA]),
+            "isolation": scores,
+            "speed_onset": float(row[K.V_SPEED_ONSET]),
+            "speed_alarm": float(row[K.V_SPEED]),
         }
+        times = {"t_alarm": float(row[K.V_T]), "t_onset": float(row[K.V_T_ONSET])}
+        if len(found) > 1:
+            # the data of the block cannot tell these apart (a crack's step on a synchronous
+            # orbit is a 1X forcing, as an unbalance's): say so, name none
+            return {"event": "unattributed", "effect": None, **times, "candidates": [f["effect"] for f in found],
+                    "value_before": {f["effect"]: f["value_before"] for f in found},
+                    "value_after": {f["effect"]: f["value_after"] for f in found},
+                    "evidence": {**evidence, "candidates": found}}
+        f = found[0]
+        evidence.update({k: f[k] for k in ("coefficients_before", "change", "change_se", "orders", "signature")})
+        return {"event": f["event"], "effect": f["effect"], **times, "value_before": f["value_before"],
+                "value_after": f["value_after"], "evidence": evidence}
 
     # ------------------------------------------------------------------ state
     @property
@@ -407,7 +468,8 @@ class Monitor:
         return {"event": "summary", "samples": self.samples, "t": self.t, "speed": self.speed,
                 "t_received": received if math.isfinite(received) else None,
                 "alarms": len(self.events),
-                "events": [{k: e[k] for k in ("event", "effect", "t_onset", "t_alarm")} for e in self.events],
+                "events": [{k: e[k] for k in ("event", "effect", "candidates", "t_onset", "t_alarm") if k in e}
+                           for e in self.events],
                 "coefficients": self.coefficients(), "significant": self.significant(),
                 "noise_floor": self.noise_floor, "counted_blocks": self.counted_blocks,
                 "threshold": self.threshold, "arl0": self.config.arl0,

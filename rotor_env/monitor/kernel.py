@@ -37,9 +37,15 @@ HOLD_BLOCKS = 2.0
 # per-effect arrays: eff[g, :]
 E_KAPPA, E_KAPPA_N, E_S, E_ON_T, E_ON_SPEED, E_ON_BLOCKS, E_ON_CHI, E_COUNTED, E_CLIP, E_CWIN, E_Q = range(11)
 N_EFF = 11
-# event row: fixed part, then before, se_before, delta, se_delta (qmax each)
-V_T, V_G, V_T_ONSET, V_S, V_CHI, V_DOF, V_BLOCKS, V_SPEED_ONSET, V_SPEED, V_KAPPA = range(10)
-N_EV_FIXED = 10
+# event row: fixed part, then before, se_before, delta, se_delta (qmax each), then each
+# effect's change alone fitted to the deciding block (G rows of 1 + 4 qmax: _isolate)
+V_T, V_G, V_T_ONSET, V_S, V_CHI, V_DOF, V_BLOCKS, V_SPEED_ONSET, V_SPEED, V_KAPPA, V_LONG_RUN = range(11)
+N_EV_FIXED = 11
+
+
+def isolation_width(effects: int, qmax: int) -> int:
+    """Entries of an event row after its fixed part and the alarm's own estimate (_isolate)."""
+    return effects * (1 + 4 * qmax)
 
 
 @njit(cache=True, error_model="numpy")
@@ -123,6 +129,48 @@ def _spd_inverse(V, q, Vinv, L):
         for a in range(q):
             Vinv[a, j] = u[a]
     return True
+
+
+@njit(cache=True, error_model="numpy")
+def _isolate(Xk, e, M, cols, eff, theta, T, lr, c_lam, ev, off, A, Ainv, Lq, b):
+    """Each effect's change alone, fitted to the deciding block's prediction error ``e``.
+
+    From ``ev[off]``, ``1 + 4 qmax`` entries per effect ``h``: the energy of ``e`` it explains,
+    ``e' X_h (X_h' X_h)^-1 X_h' e``, in the noise's long-run variance ``lr`` times the
+    effect's calibration factor (NaN where its columns are dependent in the block),
+    then the reference's coefficients and their standard errors, then the change
+    ``(X_h' X_h)^-1 X_h' e`` and its standard errors.  ``M = X' X`` of the block; ``A, Ainv, Lq, b``:
+    work arrays.
+    """
+    G, qmax = cols.shape
+    for h in range(G):
+        o = off + h * (1 + 4 * qmax)
+        q = int(eff[h, E_Q])
+        kap = max(1.0, eff[h, E_KAPPA])
+        for a in range(q):
+            v = 0.0
+            for r in range(Xk.shape[0]):
+                v += Xk[r, cols[h, a]] * e[r]
+            b[a] = v
+            for c in range(q):
+                A[a, c] = M[cols[h, a], cols[h, c]]
+            tt = 0.0
+            for m2 in range(T.shape[1]):
+                tt += T[cols[h, a], m2] * T[cols[h, a], m2]
+            ev[o + 1 + a] = theta[cols[h, a]]
+            ev[o + 1 + qmax + a] = math.sqrt(max(lr * c_lam * tt * kap, 0.0))
+        if not _spd_inverse(A, q, Ainv, Lq):
+            ev[o] = math.nan
+            continue
+        v = 0.0
+        for a in range(q):
+            d = 0.0
+            for c in range(q):
+                v += b[a] * Ainv[a, c] * b[c]
+                d += Ainv[a, c] * b[c]
+            ev[o + 1 + 2 * qmax + a] = d
+            ev[o + 1 + 3 * qmax + a] = math.sqrt(max(Ainv[a, a] * lr * kap, 0.0))
+        ev[o] = v / (lr * kap)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -377,6 +425,10 @@ def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, g
                         for j in range(q):
                             v += Ainv[a, i] * sumV[g, i, j] * Ainv[j, a]
                     ev[N_EV_FIXED + 3 * qmax + a] = math.sqrt(max(v, 0.0))
+                ev[V_LONG_RUN] = lr
+                # which effect's change alone makes this block's prediction error (isolation,
+                # decided in Monitor._event)
+                _isolate(Xk, e[:k], M, cols, eff, theta, T, lr, c_lam, ev, N_EV_FIXED + 4 * qmax, A, Ainv, Lq, s)
                 mon[M_ALARMS] += 1.0
                 restart = True
             # --- the pooled residual autocovariance, from the block's own full fit (a change

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from .core import ALARM_EVENTS, alarm_words
+
 
 class LiveView:
     """A rich ``Live`` table refreshed at every status line; alarms are kept below it.
@@ -39,7 +41,7 @@ class LiveView:
         self.live.start()
 
     def show(self, event: dict) -> None:
-        if event["event"] in ("appeared", "changed", "disappeared"):
+        if event["event"] in ALARM_EVENTS:
             self.alarms.append(event)
             if self.live is None and self.monitor is not None:  # piped: the alarm as a line now
                 self.console.print(_alarm_line(event))
@@ -91,7 +93,7 @@ class LiveView:
             self.console.print(f"  {summary['unprocessed_samples']} samples received after it not processed (the last "
                                "incomplete block, or stopped by Ctrl-C): a saved state keeps them")
         for e in summary["events"]:
-            self.console.print(f"  {e['effect']} {e['event']} at {_when(e)}")
+            self.console.print(f"  {alarm_words(e)} {e['event']} at {_when(e)}")
 
 
 def _values(values: dict) -> str:
@@ -101,6 +103,10 @@ def _values(values: dict) -> str:
 
 def _alarm_line(a: dict) -> str:
     """One alarm in words: effect, event, when, the value before and after."""
+    if a["event"] == "unattributed":  # each candidate's values, as if it alone had changed
+        each = "; ".join(f"{e}: {_values(a['value_before'][e])} -> {_values(a['value_after'][e])}"
+                         for e in a["candidates"])
+        return f"a change at {_when(a)}: {alarm_words(a)}; {each}"
     return f"{a['effect']} {a['event']} at {_when(a)}: {_values(a['value_before'])} -> {_values(a['value_after'])}"
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 from ..pages import esc, write_page
+from .core import alarm_words
 
 
 def write_report(monitor, path, *, source: str, overwrite: bool = False, clock=None) -> None:
@@ -19,7 +20,7 @@ def write_report(monitor, path, *, source: str, overwrite: bool = False, clock=N
         return f"{clock.seconds(t):.3f} s{rpm}"
 
     rows = "".join(
-        f"<tr><td>{esc(e['event'])}</td><td>{esc(e['effect'])}</td>"
+        f"<tr><td>{esc(e['event'])}</td><td>{esc(alarm_words(e))}</td>"
         f"<td>{when(e['t_onset'], e['evidence'].get('speed_onset'))}</td>"
         f"<td>{when(e['t_alarm'], e['evidence'].get('speed_alarm'))}</td><td>{esc(json.dumps(e['value_before']))}</td>"
         f"<td>{esc(json.dumps(e['value_after']))}</td><td>{e['evidence']['log10_p']:.1f}</td></tr>"

@@ -87,3 +87,40 @@ def delay(events: list[dict], effect: str, t_c: float) -> float:
     """Time from ``t_c`` to the first alarm on ``effect`` at or after it (``inf``: none)."""
     hits = [e["t_alarm"] for e in events if e["effect"] == effect and e["t_alarm"] >= t_c]
     return min(hits) - t_c if hits else math.inf
+
+
+def _unbalance_step_columns(phi, phid, phidd, th_x, th_y, w_x, w_y, ip):
+    # 0 before t = 250 on the 0.01 run-up, 1 from 1e-4 after (scalars and arrays alike)
+    on = np.minimum(np.maximum((phid - 2.5) * 1e6, 0.0), 1.0)
+    s, c = np.sin(phi), np.cos(phi)
+    a = on * (1.0 - ip) * (phidd * c - phid * phid * s)
+    b = on * (1.0 - ip) * (phidd * s + phid * phid * c)
+    return (a, -b), (b, a)
+
+
+_UNBALANCE_STEP = Effect(
+    name="test_unbalance_step",
+    parameters=(Parameter("dtau_cos", 0.0, "unbalance added at t = 250, in phase"),
+                Parameter("dtau_sin", 0.0, "unbalance added at t = 250, in quadrature")),
+    coefficients=("dtau_cos", "dtau_sin"), columns=_unbalance_step_columns,
+    to_coefficients=lambda p: (p["dtau_cos"], p["dtau_sin"]),
+    from_coefficients=lambda c: {"dtau_cos": float(c[0]), "dtau_sin": float(c[1])},
+    moment="as unbalance, from t = 250", cause="a balance weight lost at t = 250 (test only)",
+    signature="1X, from t = 250",
+)
+
+
+def unbalance_step(dtau: float, angle: float = 0.0, *, rotor: str = "table1", t_end: float = 300.0,
+                   dt: float = 0.02) -> Measurements:
+    """The healthy run-up whose unbalance gains ``dtau`` at ``angle`` (rad) at ``t = 250``
+    (a balance weight thrown off; noise-free)."""
+    added = _UNBALANCE_STEP.name not in EFFECTS
+    if added:
+        register_effect(_UNBALANCE_STEP)
+    try:
+        params = _params(HEALTHY_ROTORS[rotor], effects=(*PHYSICAL_EFFECTS, _UNBALANCE_STEP.name),
+                         dtau_cos=dtau * math.cos(angle), dtau_sin=dtau * math.sin(angle))
+        return Simulator(params).run(t_end=t_end, dt=dt, run_up=_RATE)
+    finally:
+        if added:
+            EFFECTS.pop(_UNBALANCE_STEP.name, None)

@@ -96,7 +96,8 @@ def by_speed(speeds: np.ndarray, amp: np.ndarray) -> tuple[np.ndarray, np.ndarra
 def _alarm_spans(t: np.ndarray, alarms: Sequence[Mapping], groups) -> dict[str, np.ndarray]:
     """Effect -> bool over ``t``: from each "appeared"/"changed" alarm's onset to the
     effect's next alarm (a "disappeared" ends it) or the end of the record."""
-    names = list(groups or {}) or sorted({a["effect"] for a in alarms})
+    # an unattributed alarm names no effect: it spans none
+    names = list(groups or {}) or sorted({a["effect"] for a in alarms if a.get("effect") is not None})
     out = {e: np.zeros(len(t), dtype=bool) for e in names}
     for e in names:
         mine = sorted((a for a in alarms if a["effect"] == e), key=lambda a: a["t_onset"])
