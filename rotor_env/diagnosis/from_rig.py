@@ -397,6 +397,15 @@ def diagnose_rig(
     explained = plain.verdict in ("explained", "explained_after_adding")
     if SECOND_MODE not in vd.missing or (explained and plain.changed_parts is None):
         return plain
+    if explained and vd.verdict not in ("explained", "explained_after_adding"):
+        # two rotors either side of a break, and the vectors' added mode does not explain the
+        # vectors either: it stands in for the change (a crack opening past the critical steps
+        # the 1X; a mode's resonance takes part of the step up, and its band would leave the
+        # change out of the waveforms: such a record was read as one rotor with two modes)
+        return RigDiagnosis(replace(record, notes=(*record.notes, (
+            f"the 1X vectors' other mode does not explain the vectors either ({vd.after.rms / vd.noise_floor:.3g}x "
+            "their floor): read as two rotors either side of the break, not as one rotor with two modes"))),
+            vd, plain.diagnosis, w_ref)
     # not explained, or explained only as two rotors either side of a break (a second
     # resonance mid-run is a "change" to a one-mode model), and the vectors found another
     # mode: the record less that mode's 1X, on the band where the model's own mode carries the
