@@ -215,3 +215,36 @@ def test_a_crack_one_model_cannot_hold_is_named_after_its_time(tmp_path):
     assert out["verdict"] == "explained_after_adding" and "asymmetry" in out["missing"]
     assert out["change"]["sentence"].startswith("the rotor changed at 5.3")
     assert "asymmetry appeared" in out["change"]["sentence"]
+
+
+def test_a_crack_whose_1x_step_the_vectors_take_as_a_mode_stays_a_change(tmp_path):
+    """The monitor example of the README diagnosed in batch (``rotor-id simulate rig_crack.csv
+    --rig rig.yaml --set tau=0.005 --set c=0.04 --set D=0 --crack 1200:0.1 --noise 0.3 --seed 1``:
+    a crack D = 0.1 opening at 1892 rpm, 300 + 230 t rpm).  The 1X vectors put a "second mode"
+    at about 1850 rpm into the crack's 1X step without explaining the vectors; its band ended
+    before the crack, and the record was read as one rotor with two modes (``second_mode``, the
+    crack unseen).  It stays two rotors: the crack appears at its time."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from rotor_env.diagnosis.from_rig import diagnose_rig
+    from rotor_env.diagnosis.synchronous import SECOND_MODE
+    from rotor_env.measurements.rig import SPEED_UNITS, load_rig
+    from rotor_env.measurements.waveforms import load_waveforms
+    from rotor_env.rig_simulation import simulate_rig
+
+    (tmp_path / "rig.yaml").write_text("keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n")
+    rig = load_rig(tmp_path / "rig.yaml")
+    p = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "D": 0.0},
+                    effects=("stiffness", "viscous_damping", "unbalance", "asymmetry"), crack=Crack(1200.0, 0.1))
+    run = simulate_rig(rig, p, natural_rpm=1650.0, noise=0.3, seed=1)
+    pq.write_table(pa.table(run.file_columns()), tmp_path / "run.parquet")
+    result = diagnose_rig(load_waveforms(tmp_path / "run.parquet", rig))
+    assert SECOND_MODE in result.vectors.missing and result.vectors.verdict == "partly_explained"
+    out = result.to_dict()
+    assert SECOND_MODE not in out["missing"] and not out["second_mode_subtracted"]
+    parts = out["parts"]
+    assert parts is not None and parts["changed"] and parts["appeared"] == ["asymmetry"], out["change"]
+    assert parts["t_s"] == pytest.approx(1200.0 / (1650.0 * SPEED_UNITS["rpm"]), abs=0.15)
+    assert abs(parts["after"]["parameters"]["asymmetry"]["values"]["D"]) == pytest.approx(0.1, rel=0.05)
+    assert out["verdict"] == "explained_after_adding" and "asymmetry" in out["missing"]

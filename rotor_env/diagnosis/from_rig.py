@@ -34,7 +34,9 @@ crack named at 1.056x the other).  A candidate whose signature is a 1X alone (a 
 taken away misses is a 1X too (that record named a false bow beside its crack).  A diagnosis
 is taken where it explains the record (the verdict then names ``second_mode``: one constant
 rotor with two modes is the simpler reading than two rotors); else the first one stands, with
-a note where it was not explained.  Only
+a note where it was not explained.  Two rotors are tried as two modes only where the vectors'
+two modes explain the vectors: a crack opening past the critical steps the 1X, an added mode
+takes part of the step up without explaining it, and its band would leave the change out.  Only
 after the first fails: on one-mode rotors the vectors' second mode can stand in for an effect
 their model lacks (three misalignments and a rub of the rig suite's seeds 2 and 6), and those
 records the waveforms explain.  A two-disk rotor through 1964 and 3143 rpm: 4.8x the floor
