@@ -17,7 +17,9 @@ def add_monitor_parser(sub) -> None:
         description="Read a measurement stream (CSV or Parquet, the columns diagnose reads) in chunks, identify "
         "the model recursively (forgetting or a sliding window) and run a CUSUM per effect whose threshold "
         "follows from the target in-control ARL (samples between false alarms). JSON lines: status lines, "
-        "appeared/changed/disappeared events, a summary at the end. With --rig RIG.yaml and --natural-rpm N the "
+        "appeared/changed/disappeared events (the effect isolated on the block after the crossing: each effect's "
+        "change alone fitted to it; an 'unattributed' event lists the effects it cannot tell apart), a summary at "
+        "the end. With --rig RIG.yaml and --natural-rpm N the "
         "stream holds a rig's SI waveforms (time in s, keyphasor or speed, probes), made dimensionless on the fly; "
         "events then carry s and rpm too.",
     )
