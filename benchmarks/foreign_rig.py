@@ -23,7 +23,9 @@ where ``F`` is the sum of the shaft's elastic force and of every force below (ea
 forces in newtons; the shaft's elastic force is written in the shaft's own body frame).
 
 Spin.  A constant-acceleration run-up or coast-down between 0.3 and 1.8 times the critical
-(``fn``) in 8-11 s (drawn):  ``phi(t) = phi0 + W0 t + alpha t^2 / 2``,  ``W = W0 + alpha t``.
+(``fn``) in 8-11 s (drawn):  ``phi(t) = phi0 + W0 t + alpha t^2 / 2``,  ``W = W0 + alpha t``;
+with ``--profile motor`` the same end speeds reached as a motor drives a rotor, fast at first
+and slowly at the end (``W = W0 + K (1 - exp(-2 t / duration))``, :func:`spin`).
 Before ``t = 0`` the rotor turns at ``W0`` for ``min(5 / (zeta wn), 8 s)`` (started at the
 isotropic rotor's steady state) so that the record starts settled.  ``phi`` is the angle of a
 body-fixed mark; the keyphasor notch sits at a random body angle ``nu`` (drawn), and every
@@ -221,6 +223,8 @@ class Rotor:
     fault: str = "healthy"
     #: fault parameters (SI; angles in rad): see the module docstring
     p: dict = field(default_factory=dict)
+    #: "linear" (constant acceleration) or "motor" (the speed approaches its end exponentially)
+    profile: str = "linear"
 
     @property
     def wn(self) -> float:
@@ -245,14 +249,56 @@ class Rotor:
     def phi(self, t):
         """Body angle of the mark (t < 0: the settling spin at constant speed)."""
         t = np.asarray(t, dtype=float)
-        return self.phi0 + self.W0 * t + 0.5 * self.alpha * np.where(t > 0, t, 0.0) ** 2
+        return spin(self.phi0, self.W0, self.alpha, self.duration, self.profile, t)[0]
+
+
+def _spin_scalar(r: Rotor):
+    """:func:`spin` at one time, in plain floats (the right-hand side's hot path)."""
+    phi0, W0, A = r.phi0, r.W0, r.alpha
+    if r.profile == "motor":
+        T = 0.5 * r.duration
+        K = A * r.duration / (1.0 - math.exp(-2.0))
+
+        def at(t: float) -> tuple[float, float, float]:
+            if t <= 0:
+                return phi0 + W0 * t, W0, 0.0
+            ex = math.exp(-t / T)
+            return phi0 + W0 * t + K * (t - T * (1.0 - ex)), W0 + K * (1.0 - ex), K * ex / T
+        return at
+
+    def at_linear(t: float) -> tuple[float, float, float]:
+        if t <= 0:
+            return phi0 + W0 * t, W0, 0.0
+        return phi0 + W0 * t + 0.5 * A * t * t, W0 + A * t, A
+    return at_linear
+
+
+def spin(phi0: float, W0: float, A: float, duration: float, profile: str, t):
+    """``(phi, W, W')`` at ``t`` (scalars or arrays; ``t < 0``: the settling spin at ``W0``).
+
+    "linear": ``W = W0 + A t``.  "motor": ``W = W0 + K (1 - exp(-t / T))``, ``T = duration / 2``,
+    ``K = A duration / (1 - exp(-2))``: the same end speed, reached fast at first and slowly at
+    the end (an induction motor's run-up against its load; a coast-down against drag)."""
+    tp = np.where(np.asarray(t) > 0, t, 0.0)
+    neg = np.asarray(t) - tp
+    if profile == "motor":
+        T = 0.5 * duration
+        K = A * duration / (1.0 - math.exp(-2.0))
+        ex = np.exp(-tp / T)
+        ph = phi0 + W0 * (tp + neg) + K * (tp - T * (1.0 - ex))
+        W = W0 + K * (1.0 - ex)
+        a = np.where(np.asarray(t) > 0, K * ex / T, 0.0)
+        return ph, W, a
+    ph = phi0 + W0 * (tp + neg) + 0.5 * A * tp * tp
+    return ph, W0 + A * tp, np.where(np.asarray(t) > 0, A, 0.0)
 
 
 def _rhs(r: Rotor):
     """The equations of motion ``s' = f(t, s)``, ``s = (x, y, x', y')`` (m, m/s)."""
     m, k, c, me = r.m, r.k, r.c, r.m * r.e
-    W0, A, phi0, beta, nu = r.W0, r.alpha, r.phi0, r.beta, r.nu
+    beta, nu = r.beta, r.nu
     p, f = r.p, r.fault
+    spin_at = _spin_scalar(r)
     cos, sin, hypot, tanh = math.cos, math.sin, math.hypot, math.tanh
     body = f in ("asymmetry", "breathing_crack", "breathing_crack_side")
     psi = p.get("psi", 0.0)
@@ -271,10 +317,7 @@ def _rhs(r: Rotor):
 
     def rhs(t, s):
         x, y, vx, vy = s
-        if t > 0:
-            ph, W, a = phi0 + W0 * t + 0.5 * A * t * t, W0 + A * t, A
-        else:
-            ph, W, a = phi0 + W0 * t, W0, 0.0
+        ph, W, a = spin_at(t)
         # unbalance: d'Alembert force of the eccentric mass
         cu, su = cos(ph + beta), sin(ph + beta)
         fx = me * (W * W * cu + a * su) - c * vx + load_x
@@ -328,16 +371,14 @@ def _rhs_two_disks(r: Rotor):
     mu, kc, D, e2, beta2 = p["mu"], p["kc"], p.get("D", 0.0), p["e2"], p["beta2"]
     m2, k2, c1 = mu * m, mu * k, r.c
     c2 = mu * c1
-    W0, A, phi0, beta, nu, psi = r.W0, r.alpha, r.phi0, r.beta, r.nu, p.get("psi", 0.0)
+    beta, nu, psi = r.beta, r.nu, p.get("psi", 0.0)
     me1, me2 = m * r.e, m2 * e2
     cos, sin = math.cos, math.sin
+    spin_at = _spin_scalar(r)
 
     def rhs(t, s):
         x1, y1, vx1, vy1, x2, y2, vx2, vy2 = s
-        if t > 0:
-            ph, W, a = phi0 + W0 * t + 0.5 * A * t * t, W0 + A * t, A
-        else:
-            ph, W, a = phi0 + W0 * t, W0, 0.0
+        ph, W, a = spin_at(t)
         c_1, s_1 = cos(ph + beta), sin(ph + beta)
         c_2, s_2 = cos(ph + beta2), sin(ph + beta2)
         f1x = me1 * (W * W * c_1 + a * s_1) - c1 * vx1 - kc * (x1 - x2)
@@ -408,7 +449,7 @@ def _case_rng(seed: int, case: str, *extra: int) -> np.random.Generator:
 
 
 def draw_rotor(seed: int, case: str, *, fs: float | None = None, crack_law: str = "mayes",
-               psi_deg: float | None = None) -> tuple[Rotor, dict]:
+               psi_deg: float | None = None, profile: str = "linear") -> tuple[Rotor, dict]:
     """The case's rotor, run and fault from ``(seed, case)`` (the fault's size needing the
     healthy peak, the rub's clearance, is set by :func:`make_record`); and the DAQ draws."""
     rng = _case_rng(seed, case)
@@ -420,7 +461,8 @@ def draw_rotor(seed: int, case: str, *, fs: float | None = None, crack_law: str 
     f_from, f_to = (lo, hi) if direction == "run-up" else (hi, lo)
     rotor = Rotor(m=rng.uniform(1.0, 20.0), fn=fn, zeta=zeta, e=2 * zeta * peak, beta=rng.uniform(0, 2 * math.pi),
                   nu=rng.uniform(0, 2 * math.pi), f_from=f_from, f_to=f_to, duration=rng.uniform(8.0, 11.0),
-                  phi0=rng.uniform(0, 2 * math.pi), fault=case if case not in ("healthy", "runout") else "healthy")
+                  phi0=rng.uniform(0, 2 * math.pi), fault=case if case not in ("healthy", "runout") else "healthy",
+                  profile=profile)
     daq = {"fs": float(fs) if fs else float(SAMPLE_RATES[int(rng.integers(len(SAMPLE_RATES)))]),
            "direction": direction, "gaps_um": (float(rng.uniform(900, 1400)), float(rng.uniform(900, 1400)))}
     k = rotor.k
@@ -499,9 +541,10 @@ def orbit_peak(xy: np.ndarray) -> float:
 
 
 def make_record(case: str, seed: int, noise_um: float, *, fs: float | None = None, colour: float = 0.0,
-                crack_law: str = "mayes", psi_deg: float | None = None) -> tuple[Record, np.ndarray, dict]:
+                crack_law: str = "mayes", psi_deg: float | None = None,
+                profile: str = "linear") -> tuple[Record, np.ndarray, dict]:
     """Simulate one record: the :class:`Record`, its sample times, its columns and the truth."""
-    rotor, daq = draw_rotor(seed, case, fs=fs, crack_law=crack_law, psi_deg=psi_deg)
+    rotor, daq = draw_rotor(seed, case, fs=fs, crack_law=crack_law, psi_deg=psi_deg, profile=profile)
     t = sample_times(rotor, daq["fs"])
     truth: dict = {}
     if case == "rub":
@@ -715,10 +758,12 @@ def judge(case: str, truth: dict, d: dict, true_noise: float) -> dict:
 
 
 def run_one(case: str, seed: int, noise_um: float, *, fs: float | None = None, colour: float = 0.0,
-            crack_law: str = "mayes", psi_deg: float | None = None, keep: Path | None = None) -> dict:
+            crack_law: str = "mayes", psi_deg: float | None = None, keep: Path | None = None,
+            profile: str = "linear") -> dict:
     """Simulate, write, read back and diagnose one record; its outcome (JSON-able)."""
     t0 = time.perf_counter()
-    rec, t, made = make_record(case, seed, noise_um, fs=fs, colour=colour, crack_law=crack_law, psi_deg=psi_deg)
+    rec, t, made = make_record(case, seed, noise_um, fs=fs, colour=colour, crack_law=crack_law, psi_deg=psi_deg,
+                               profile=profile)
     sim_s = time.perf_counter() - t0
     out = {"case": case, "seed": seed, "noise_um": noise_um, "fs": rec.fs, "colour": colour,
            "true_noise_um": true_noise_um(rec), "truth": made["truth"], "simulation_s": sim_s,
@@ -806,6 +851,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fs", type=float, default=None, help="sample rate, Hz (default drawn per case)")
     ap.add_argument("--colour", type=float, default=0.0, help="AR(1) coefficient of an added coloured noise")
     ap.add_argument("--crack-law", choices=("mayes", "gasch"), default="mayes")
+    ap.add_argument("--profile", choices=("linear", "motor"), default="linear",
+                    help="the speed's course: constant acceleration, or a motor's (fast first, slow at the end)")
     ap.add_argument("--keep", default=None, help="folder to keep the written records in")
     ap.add_argument("--out", default=None, help="JSON of every outcome")
     args = ap.parse_args(argv)
@@ -824,7 +871,7 @@ def main(argv: list[str] | None = None) -> int:
     for case in cases:
         for noise in noises:
             o = run_one(case, args.seed, noise, fs=args.fs, colour=args.colour, crack_law=args.crack_law,
-                        keep=Path(args.keep) if args.keep else None)
+                        keep=Path(args.keep) if args.keep else None, profile=args.profile)
             outcomes.append(o)
             status = ("ERROR " + o["error"]) if "error" in o else (
                 f"{'ok ' if o['right'] else 'BAD'} named {o['named']} floor {o['floor_ratio'] or math.nan:.2f}x "

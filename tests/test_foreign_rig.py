@@ -17,6 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import foreign_rig as fr
@@ -55,6 +56,31 @@ def test_simulator_is_the_jeffcott_rotor():
     assert len(edges) > 10
     phase = np.mod(r.phi(t[edges]) + r.nu, 2 * math.pi)
     assert np.all(phase < r.W0 * 1e-4 + 1e-9)  # within one sample after the edge
+
+
+def test_motor_profile_spin_is_consistent():
+    """``--profile motor``: the speed is the angle's derivative and the acceleration the speed's
+    (central differences), both ends as the linear run's, the speed monotone with its
+    acceleration falling; the scalar path of the right-hand side gives the same numbers."""
+    for case in ("asymmetry", "rub"):
+        lin, _ = fr.draw_rotor(SEED, case)
+        mot, _ = fr.draw_rotor(SEED, case, profile="motor")
+        assert replace(mot, profile="linear") == lin  # the same draw, only the course of the speed differs
+        t = np.linspace(0.01, mot.duration, 400)
+        ph, W, a = fr.spin(mot.phi0, mot.W0, mot.alpha, mot.duration, "motor", t)
+        h = 1e-5
+        ph_p, W_p, _ = fr.spin(mot.phi0, mot.W0, mot.alpha, mot.duration, "motor", t + h)
+        ph_m, W_m, _ = fr.spin(mot.phi0, mot.W0, mot.alpha, mot.duration, "motor", t - h)
+        assert np.allclose((ph_p - ph_m) / (2 * h), W, rtol=1e-6)
+        assert np.allclose((W_p - W_m) / (2 * h), a, rtol=1e-5)
+        end = fr.spin(mot.phi0, mot.W0, mot.alpha, mot.duration, "motor", np.array([0.0, mot.duration]))[1]
+        assert end == pytest.approx([2 * math.pi * lin.f_from, 2 * math.pi * lin.f_to], rel=1e-12)
+        sign = math.copysign(1.0, lin.f_to - lin.f_from)
+        assert np.all(sign * np.diff(W) > 0) and np.all(np.diff(np.abs(a)) < 0)
+        at = fr._spin_scalar(mot)
+        for x in (-0.5, 0.0, 1.0, 5.0):
+            assert at(x) == pytest.approx(tuple(float(v) for v in fr.spin(
+                mot.phi0, mot.W0, mot.alpha, mot.duration, "motor", np.array(x))), rel=1e-12, abs=1e-12)
 
 
 def test_healthy_rotor_nothing_named_and_floor_right():
