@@ -167,7 +167,9 @@ class Monitor:
     ``update(chunk)`` takes an ``(m, 10)`` array (columns :data:`rotor_env.measurements.COLUMNS`,
     uniformly sampled, continuing the stream) and returns the events it raised: dicts
     ``{"event": "appeared" | "changed" | "disappeared", "effect", "t_alarm", "t_onset",
-    "value_before", "value_after", "evidence"}`` and, with ``status_every``, status
+    "value_before", "value_after", "evidence"}`` (``"unattributed"``, ``"effect": None`` and
+    ``"candidates"`` where the deciding block cannot tell which of several effects changed:
+    :mod:`.detector`, *Isolation*) and, with ``status_every``, status
     dicts.  Samples are processed in whole blocks; the rest waits for the next chunk
     (the results do not depend on how the stream is cut).  A chunk that is not valid
     raises :class:`~rotor_env.measurements.files.MeasurementError` naming its row, and changes nothing.
