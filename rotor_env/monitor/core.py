@@ -352,7 +352,7 @@ class Monitor:
         candidates, scores = self._isolation(row)
         q = int(self._q[g])
         onset = (row[o : o + q], row[o + qm : o + qm + q])
-        one = []
+        sized = []  # (effect, before, its se, after, its se, the change's se)
         for h in candidates or [g]:
             qh = int(self._q[h])
             oh = o + 4 * qm + h * (1 + 4 * qm) + 1
@@ -370,9 +370,9 @@ class Monitor:
                 after = before + row[o + 2 * qm : o + 2 * qm + q]
                 se_delta = row[o + 3 * qm : o + 3 * qm + q]
                 se_after = np.hypot(se_before, se_delta)
-            one.append((h, before, se_before, after, se_after, se_delta))
+            sized.append((h, before, se_before, after, se_after, se_delta))
         found = []
-        for h, before, se_before, after, se_after, se_delta in one:
+        for h, before, se_before, after, se_after, se_delta in sized:
             delta = after - before
             name = self.effects[h]
             cols = self.core.spec.groups[name]
