@@ -132,6 +132,16 @@ def _spd_inverse(V, q, Vinv, L):
 
 
 @njit(cache=True, error_model="numpy")
+def _reference_se(T, col, lr, c_lam, kap):
+    """Standard error of the reference's coefficient ``col``: ``sqrt(lr c_lam (T T')_jj kappa)``
+    (``T`` the inverse factor of the forgetting fit, ``lr`` the noise's long-run variance)."""
+    tt = 0.0
+    for m2 in range(T.shape[1]):
+        tt += T[col, m2] * T[col, m2]
+    return math.sqrt(max(lr * c_lam * tt * kap, 0.0))
+
+
+@njit(cache=True, error_model="numpy")
 def _isolate(Xk, e, M, cols, eff, theta, T, lr, c_lam, ev, off, A, Ainv, Lq, b):
     """Each effect's change alone, fitted to the deciding block's prediction error ``e``.
 
@@ -154,11 +164,8 @@ def _isolate(Xk, e, M, cols, eff, theta, T, lr, c_lam, ev, off, A, Ainv, Lq, b):
             b[a] = v
             for c in range(q):
                 A[a, c] = M[cols[h, a], cols[h, c]]
-            tt = 0.0
-            for m2 in range(T.shape[1]):
-                tt += T[cols[h, a], m2] * T[cols[h, a], m2]
             ev[o + 1 + a] = theta[cols[h, a]]
-            ev[o + 1 + qmax + a] = math.sqrt(max(lr * c_lam * tt * kap, 0.0))
+            ev[o + 1 + qmax + a] = _reference_se(T, cols[h, a], lr, c_lam, kap)
         if not _spd_inverse(A, q, Ainv, Lq):
             ev[o] = math.nan
             continue
@@ -365,10 +372,7 @@ def process_blocks(data, X, y, per, R, col_sq, sums, masks, cols, scales, cfg, g
                         eff[g, E_ON_CHI] = 0.0
                         for a in range(q):
                             on_before[g, a] = theta[cols[g, a]]
-                            tt = 0.0
-                            for m2 in range(n):
-                                tt += T[cols[g, a], m2] * T[cols[g, a], m2]
-                            on_se[g, a] = math.sqrt(lr * c_lam * tt * kap)
+                            on_se[g, a] = _reference_se(T, cols[g, a], lr, c_lam, kap)
                             sum_s[g, a] = 0.0
                             for c in range(q):
                                 sumA[g, a, c] = 0.0
