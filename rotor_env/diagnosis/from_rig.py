@@ -54,6 +54,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..effects import EFFECTS
+from ..measurements.artefacts import remove_artefacts
 from ..measurements.rig import SPEED_UNITS
 from ..measurements.waveforms import LENGTH_UNIT, RigRecord, WaveformError
 from ..results import Result
@@ -363,6 +364,8 @@ def diagnose_rig(
     from ..progress import step
 
     ip = record.rig.ip
+    step("instrument artefacts: lines at fixed frequencies, runout above 2X")
+    record = remove_artefacts(record)
     step("1X vectors: order tracking and the synchronous fit")
     vd = diagnose_vectors(record.vectors((1,)), ip=ip, alpha=alpha)
     if RUNOUT in vd.missing and record.rig.slow_roll_rpm is None:

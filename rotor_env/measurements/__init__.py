@@ -12,6 +12,8 @@
 - :mod:`.vectors` — order tracking (1X, 2X, ... vectors per revolution) and the
   order-tracked vector tables condition-monitoring systems export.
 - :mod:`.waveforms` — a rig's raw waveforms (keyphasor and probes) to measurements.
+- :mod:`.artefacts` — what the instruments add and no rotor model holds: lines at fixed
+  frequencies (mains hum) and the probe track's runout above 2X, found and taken out.
 
 Every reader of data lives here; what simulates a rig recording (the simulator's output
 written as a rig would record it) is :mod:`rotor_env.rig_simulation`, beside the simulator.
