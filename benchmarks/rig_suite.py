@@ -32,6 +32,7 @@ against probe noise, the per-fault table, every failure, the time per record.
     python benchmarks/rig_suite.py --quick                    # 6 records, ~2 min
     python benchmarks/rig_suite.py --reps 1 --workers 2       # 4 noises x 13 kinds
     python benchmarks/rig_suite.py --noise 0.3 --faults asymmetry,rub --reps 3
+    python benchmarks/rig_suite.py --noise 0.5 --artefacts    # with mains hum and a scratch on every track
     python benchmarks/rig_suite.py --report seed1.json seed2.json   # the tables of saved runs together
 """
 
@@ -96,6 +97,9 @@ class RecordSpec:
     fixed: tuple[tuple[str, float], ...] = ()
     #: the sweep's duration (s), drawn from [8, 11] when 0
     duration_s: float = 0.0
+    #: instrument artefacts on the probes (``--artefacts``): mains hum at 50 or 60 Hz with its
+    #: third harmonic, and a scratch on every track
+    artefacts: bool = False
 
 
 def build_specs(noises=NOISES_UM, kinds=KINDS, reps: int = 1, seed: int = 0, quick: bool = False) -> list[RecordSpec]:
@@ -242,15 +246,20 @@ def make_record(spec: RecordSpec, folder: Path) -> tuple[Path, Path, dict]:
     planes = list(dict.fromkeys(p.plane for p in rig.probes))
     runout = {pl: float(rng.uniform(3.0, 8.0)) for pl in planes} if spec.fault == "runout" else 0.0
     runout_deg = {pl: float(rng.uniform(0.0, 360.0)) for pl in planes} if spec.fault == "runout" else 0.0
+    art = {}
+    if spec.artefacts:
+        mains = float(rng.choice([50.0, 60.0]))
+        art = {"lines": ((mains, float(rng.uniform(0.3, 1.5))), (3 * mains, float(rng.uniform(0.1, 0.5)))),
+               "scratch": float(rng.uniform(1.0, 4.0))}
     run = simulate_rig(rig, _params(healthy, extra, rig.ip), **run_kw, noise=spec.noise_um, runout=runout,
-                       runout_phase_deg=runout_deg, seed=spec.seed)
+                       runout_phase_deg=runout_deg, seed=spec.seed, **art)
     faulty_peak = _orbit_peak(simulate_rig(rig, _params(healthy, extra, rig.ip), **run_kw, noise=0.0), rig) \
         if spec.fault == "rub" else None
     data_path = folder / f"run{spec.index}.parquet"
     pq.write_table(pa.table(run.file_columns()), data_path)
     truth = {"healthy": healthy, "fault": extra, "ip": rig.ip, "healthy_peak": peak, "rpm_from": a, "rpm_to": b,
              "rpm_per_s": rpm_per_s, "duration_s": (b - a) / rpm_per_s, "samples": len(run.columns["t"]),
-             "runout_um": runout, "runout_phase_deg": runout_deg, "faulty_peak": faulty_peak}
+             "runout_um": runout, "runout_phase_deg": runout_deg, "faulty_peak": faulty_peak, "artefacts": art}
     return rig_path, data_path, truth
 
 
@@ -376,8 +385,8 @@ def detection_table(outcomes: list[dict]) -> str:
              "runout) | crack named for a non-crack fault | floor / true noise: median (range) | crack size error: "
              "median (max) | crack axis error (deg): median (max) | parameters said not constant (all rotors constant) | errors |",
              "|---|---|---|---|---|---|---|---|---|---|"]
-    for noise in sorted({o["spec"]["noise_um"] for o in outcomes}):
-        rows = [o for o in outcomes if o["spec"]["noise_um"] == noise]
+    for key in sorted({_row_key(o) for o in outcomes}):
+        rows = [o for o in outcomes if _row_key(o) == key]
         ok = [o for o in rows if "error" not in o]
         faults = [o for o in ok if o["spec"]["fault"] in FAULTS]
         clean = [o for o in ok if o["spec"]["fault"] in ("healthy", "runout")]
@@ -387,7 +396,7 @@ def detection_table(outcomes: list[dict]) -> str:
         sizes = [c["size_error"] * 100 for c in cracks if c]
         axes = [c["axis_error_deg"] for c in cracks if c]
         lines.append(
-            f"| {noise:g} | {sum(o['right'] for o in faults)}/{len(faults)} "
+            f"| {_row_label(key)} | {sum(o['right'] for o in faults)}/{len(faults)} "
             f"| {sum(bool(o.get('said_undecidable')) for o in faults)}/{len(faults)} "
             f"| {sum(o['false_alarm'] for o in clean)}/{len(clean)} "
             f"| {sum(o['crack_named_falsely'] for o in noncrack)}/{len(noncrack)} "
@@ -399,14 +408,23 @@ def detection_table(outcomes: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _row_key(o: dict) -> tuple[float, bool]:
+    return o["spec"]["noise_um"], bool(o["spec"].get("artefacts"))
+
+
+def _row_label(key: tuple[float, bool]) -> str:
+    return f"{key[0]:g}" + (" + hum, scratch" if key[1] else "")
+
+
 def per_fault_table(outcomes: list[dict]) -> str:
     """Markdown: per kind (rows) and noise (columns), right / records."""
-    noises = sorted({o["spec"]["noise_um"] for o in outcomes})
-    lines = ["| record | " + " | ".join(f"{n:g} um" for n in noises) + " |", "|---" * (len(noises) + 1) + "|"]
+    noises = sorted({_row_key(o) for o in outcomes})
+    lines = ["| record | " + " | ".join(f"{_row_label(n)} um" for n in noises) + " |",
+             "|---" * (len(noises) + 1) + "|"]
     for kind in KINDS:
         cells = []
         for n in noises:
-            rows = [o for o in outcomes if o["spec"]["fault"] == kind and o["spec"]["noise_um"] == n]
+            rows = [o for o in outcomes if o["spec"]["fault"] == kind and _row_key(o) == n]
             und = sum(bool(o.get("said_undecidable")) for o in rows)
             cells.append((f"{sum(bool(o.get('right')) for o in rows)}/{len(rows)}"
                           + (f" ({und} undecidable)" if und else "")) if rows else "-")
@@ -474,6 +492,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--noise", default=None, help="probe noise levels, um (comma-separated; default 0.1,0.3,1,3)")
     ap.add_argument("--faults", default=None, help=f"record kinds (comma-separated; default all: {','.join(KINDS)})")
     ap.add_argument("--reps", type=int, default=1, help="records per kind and noise level")
+    ap.add_argument("--artefacts", action="store_true",
+                    help="instrument artefacts on every record: mains hum (50 or 60 Hz, 0.3-1.5 um, and its third "
+                         "harmonic) and a scratch on every track (1-4 um)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2, help="worker processes (one BLAS thread each)")
     ap.add_argument("--out", default="rig_suite.json", help="JSON of every outcome (rewritten after each record)")
@@ -512,6 +533,10 @@ def main(argv: list[str] | None = None) -> int:
     if any(not (math.isfinite(n) and n > 0) for n in noises):
         ap.error(f"--noise: positive numbers, got {noises}")
     specs = build_specs(noises, kinds, args.reps, args.seed, args.quick)
+    if args.artefacts:
+        from dataclasses import replace
+
+        specs = [replace(s, artefacts=True) for s in specs]
     if args.medium:
         # a subset of the full plan (same indices and seeds): what a loaded 2-core machine
         # diagnoses in about half an hour

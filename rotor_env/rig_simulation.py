@@ -13,7 +13,7 @@ Everything is reproducible from ``seed``.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,6 +72,8 @@ def simulate_rig(
     noise: float = 0.0,
     runout: float | Mapping[str, float] = 0.0,
     runout_phase_deg: float | Mapping[str, float] = 0.0,
+    lines: Sequence[tuple[float, float]] = (),
+    scratch: float = 0.0,
     seed: int | None = None,
 ) -> RigRun:
     """Simulate a start-up (``rpm_per_s > 0``) or coast-down (``< 0``) as the rig records it.
@@ -82,6 +84,13 @@ def simulate_rig(
     value gives each plane's track its own runout (a real shaft's tracks differ; the same
     runout on both planes of a tilt rig is a parallel offset, which the planes' difference
     cancels).
+
+    Instrument artefacts (:mod:`rotor_env.measurements.artefacts` takes them out):
+    ``lines``: ``(frequency Hz, amplitude)`` pairs, sinusoids that do not follow the shaft
+    (mains hum and its harmonics), each probe with its own phase drawn from ``seed``;
+    ``scratch``: a narrow mark on each plane's track (its own angle on each, drawn from
+    ``seed``), a pulse of this height a turn wide 1/12 of a turn, every probe seeing it at its
+    own angle -- a runout pattern with harmonics far above 2X.
     """
     def per_plane(v, plane) -> float:
         return float(v.get(plane, 0.0)) if isinstance(v, Mapping) else float(v)
@@ -119,6 +128,8 @@ def simulate_rig(
         u = meas.theta_y * LENGTH_UNIT
         v = meas.theta_x * LENGTH_UNIT
     rng = np.random.default_rng(seed)
+    # the artefacts' own draws: the noise of a seed stays what it was without them
+    rng_art = np.random.default_rng(None if seed is None else [seed, 1])
     cols: dict[str, np.ndarray] = {"t": t}
     if rig.keyphasor is not None:
         frac = (phi / (2 * math.pi)) % 1.0
@@ -130,6 +141,11 @@ def simulate_rig(
         cols[rig.keyphasor] = kp
     else:
         cols[rig.speed] = meas.phi_dot * w_ref / SPEED_UNITS[rig.speed_unit]
+    for f_hz, amp in lines:
+        if not (math.isfinite(f_hz) and f_hz > 0 and math.isfinite(amp)):
+            raise ValueError(f"lines: ({f_hz!r}, {amp!r}) is not a (positive frequency in Hz, amplitude) pair")
+    line_phase = {(p.name, j): float(rng_art.uniform(0, 2 * math.pi)) for p in rig.probes for j in range(len(lines))}
+    mark = {pl: float(rng_art.uniform(0, 2 * math.pi)) for pl in rig.plane_names}
     for p in rig.probes:
         r = per_plane(runout, p.plane) * np.exp(1j * math.radians(per_plane(runout_phase_deg, p.plane)))
         metres = u * math.cos(p.angle) + v * math.sin(p.angle)
@@ -138,6 +154,13 @@ def simulate_rig(
         # the probe sees the track's runout at its own angle: phi - angle
         reading_um = metres / 1e-6 + np.real(r * np.exp(1j * (phi - p.angle))) * _unit_um(rig)
         reading_um = reading_um + rng.normal(0.0, noise * _unit_um(rig), len(t)) if noise > 0 else reading_um
+        for j, (f_hz, amp) in enumerate(lines):
+            reading_um = reading_um + amp * _unit_um(rig) * np.cos(2 * math.pi * f_hz * t + line_phase[p.name, j])
+        if scratch:
+            # a raised cosine a twelfth of a turn wide, centred on the mark, under the probe
+            d = np.angle(np.exp(1j * (phi - p.angle - mark[p.plane])))
+            reading_um = reading_um + scratch * _unit_um(rig) * np.where(
+                np.abs(d) < math.pi / 12, 0.5 * (1 + np.cos(12 * d)), 0.0)
         if rig.displacement in ("V", "mV"):
             volts_mv = reading_um * rig.sensitivity_mv_per_um + GAP_VOLTS * 1000.0
             cols[p.name] = volts_mv / (1000.0 if rig.displacement == "V" else 1.0)

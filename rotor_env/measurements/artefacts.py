@@ -68,7 +68,7 @@ MIN_CLEAR_SEGMENTS = 3
 #: revolutions in a window of the runout search (Hann-weighted, every half window)
 WINDOW_REVOLUTIONS = 4
 #: highest runout order looked for
-TOP_RUNOUT_ORDER = 10
+TOP_RUNOUT_ORDER = 30
 #: a runout order's median vector must be this many of its standard errors from zero
 RUNOUT_Z = 6.0
 #: low- and high-speed thirds agree within this share of the pattern's size
@@ -267,7 +267,7 @@ def runout_harmonics(t: np.ndarray, phi: np.ndarray, speed: np.ndarray,
     if revs < 30:
         return []
     per_turn = 2 * math.pi / max(float(np.max(np.diff(phi))), 1e-12)
-    top = int(min(TOP_RUNOUT_ORDER, math.floor(per_turn / 5.0)))
+    top = int(min(TOP_RUNOUT_ORDER, math.floor(per_turn / 4.0)))
     orders = tuple(range(3, top + 1))
     if not orders:
         return []
