@@ -89,8 +89,9 @@ def simulate_rig(
     ``lines``: ``(frequency Hz, amplitude)`` pairs, sinusoids that do not follow the shaft
     (mains hum and its harmonics), each probe with its own phase drawn from ``seed``;
     ``scratch``: a narrow mark on each plane's track (its own angle on each, drawn from
-    ``seed``), a pulse of this height a turn wide 1/12 of a turn, every probe seeing it at its
-    own angle -- a runout pattern with harmonics far above 2X.
+    ``seed``), a raised-cosine pulse of this height 1/12 of a turn wide, every probe seeing it at
+    its own angle -- a runout pattern with harmonics far above 2X (to order 96, those below 0.4
+    of the sample rate: the acquisition's anti-alias filter).
     """
     def per_plane(v, plane) -> float:
         return float(v.get(plane, 0.0)) if isinstance(v, Mapping) else float(v)
@@ -157,10 +158,15 @@ def simulate_rig(
         for j, (f_hz, amp) in enumerate(lines):
             reading_um = reading_um + amp * _unit_um(rig) * np.cos(2 * math.pi * f_hz * t + line_phase[p.name, j])
         if scratch:
-            # a raised cosine a twelfth of a turn wide, centred on the mark, under the probe
-            d = np.angle(np.exp(1j * (phi - p.angle - mark[p.plane])))
-            reading_um = reading_um + scratch * _unit_um(rig) * np.where(
-                np.abs(d) < math.pi / 12, 0.5 * (1 + np.cos(12 * d)), 0.0)
+            # a raised cosine a twelfth of a turn wide, centred on the mark, under the probe, as
+            # the acquisition's anti-alias filter passes it: its orders below 0.4 of the sample
+            # rate at each instant (sampled as it is, its orders above Nyquist would fold back
+            # into the band as noise no rig records)
+            d = phi - p.angle - mark[p.plane]
+            rev_hz = np.abs(meas.phi_dot) * w_ref / (2 * math.pi)
+            for order, c in enumerate(SCRATCH_ORDERS[1:], start=1):
+                passed = order * rev_hz < 0.4 * sample_rate
+                reading_um = reading_um + scratch * _unit_um(rig) * c * np.cos(order * d) * passed
         if rig.displacement in ("V", "mV"):
             volts_mv = reading_um * rig.sensitivity_mv_per_um + GAP_VOLTS * 1000.0
             cols[p.name] = volts_mv / (1000.0 if rig.displacement == "V" else 1.0)
@@ -168,6 +174,19 @@ def simulate_rig(
             cols[p.name] = reading_um * 1e-6 / _metres(rig)
     cols["_phi"] = phi
     return RigRun(cols, natural_rpm, params)
+
+
+def _scratch_orders(width: float = 1.0 / 12.0, orders: int = 96) -> np.ndarray:
+    """Fourier cosine coefficients (orders 0..``orders``) of a raised-cosine mark of unit height
+    ``width`` of a turn wide: the runout pattern of a scratch."""
+    d = np.linspace(-math.pi, math.pi, 8192, endpoint=False)
+    pulse = np.where(np.abs(d) < math.pi * width, 0.5 * (1 + np.cos(d / width)), 0.0)
+    spec = np.fft.rfft(np.fft.ifftshift(pulse)) / len(d)
+    return np.concatenate([[spec[0].real], 2 * spec[1:orders + 1].real])
+
+
+#: a scratch's runout pattern by order (:func:`simulate_rig`'s ``scratch``)
+SCRATCH_ORDERS = _scratch_orders()
 
 
 def _metres(rig: Rig) -> float:

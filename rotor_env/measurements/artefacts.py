@@ -267,7 +267,7 @@ def runout_harmonics(t: np.ndarray, phi: np.ndarray, speed: np.ndarray,
     if revs < 30:
         return []
     per_turn = 2 * math.pi / max(float(np.max(np.diff(phi))), 1e-12)
-    top = int(min(TOP_RUNOUT_ORDER, math.floor(per_turn / 4.0)))
+    top = int(min(TOP_RUNOUT_ORDER, math.floor(per_turn / 2.5)))
     orders = tuple(range(3, top + 1))
     if not orders:
         return []
