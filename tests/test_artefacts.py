@@ -157,3 +157,39 @@ def test_a_crack_under_hum_and_a_scratch_is_named_with_its_size_and_axis(tmp_pat
     assert out["missing"] == ["asymmetry"], out["rejected"]
     err = rs.crack_errors("asymmetry", truth["fault"], out["parameters"])
     assert err["size_error"] < 0.05 and err["axis_error_deg"] < 5.0, err
+
+
+def test_the_rig_simulators_artefacts_are_found_as_simulated(tmp_path):
+    """``simulate_rig(lines=, scratch=)`` (the suite's ``--artefacts``) against the finder: the
+    line's amplitude on every probe within 3 %, the scratch's orders 3-8 as its pattern
+    (:data:`~rotor_env.rig_simulation.SCRATCH_ORDERS` times its height)."""
+    import json
+
+    from rotor_env.measurements.rig import load_rig
+    from rotor_env.measurements.waveforms import load_waveforms
+    from rotor_env.params import RotorParams
+    from rotor_env.rig_simulation import SCRATCH_ORDERS, simulate_rig
+
+    rig_path = tmp_path / "rig.json"
+    rig_path.write_text(json.dumps({"keyphasor": "kp", "probes": {"x": 45, "y": -45}, "units": {"displacement": "um"}}))
+    rig = load_rig(rig_path)
+    params = RotorParams(values={"k": 1.0, "c": 0.04, "tau": 0.005, "beta": 0.7},
+                         effects=("stiffness", "viscous_damping", "unbalance"))
+    run = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=400.0, rpm_to=3000.0, rpm_per_s=300.0,
+                       sample_rate=5000.0, noise=0.5, lines=((60.0, 0.8),), scratch=2.0, seed=11)
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    pq.write_table(pa.table(run.file_columns()), tmp_path / "run.parquet")
+    record = load_waveforms(tmp_path / "run.parquet", rig)
+    lines = find_lines(record.t, record.speed / (2 * math.pi), record.readings)
+    assert len(lines) == 1 and abs(lines[0].frequency_hz - 60.0) < 0.005
+    for amp in lines[0].amplitude.values():
+        assert abs(amp / 0.8 - 1.0) < 0.03
+    # the scratch: each order's size against its pattern, within four of the median's standard
+    # errors (0.5 um of noise on a 0.16 um order: about 2 % each)
+    got = {(h.probe, h.order): h for h in runout_harmonics(record.t, record.phi, record.speed, record.readings)}
+    for probe in ("x", "y"):
+        for n in range(3, 9):
+            h = got[probe, n]
+            assert abs(abs(h.vector) - 2.0 * SCRATCH_ORDERS[n]) < 4.0 * h.std_error + 0.01 * abs(h.vector), (probe, n)
