@@ -74,6 +74,8 @@ def simulate_rig(
     runout_phase_deg: float | Mapping[str, float] = 0.0,
     lines: Sequence[tuple[float, float]] = (),
     scratch: float = 0.0,
+    sensitivity: Mapping[str, float] | None = None,
+    angle_error_deg: Mapping[str, float] | None = None,
     seed: int | None = None,
 ) -> RigRun:
     """Simulate a start-up (``rpm_per_s > 0``) or coast-down (``< 0``) as the rig records it.
@@ -91,7 +93,9 @@ def simulate_rig(
     ``scratch``: a narrow mark on each plane's track (its own angle on each, drawn from
     ``seed``), a raised-cosine pulse of this height 1/12 of a turn wide, every probe seeing it at
     its own angle -- a runout pattern with harmonics far above 2X (to order 96, those below 0.4
-    of the sample rate: the acquisition's anti-alias filter).
+    of the sample rate: the acquisition's anti-alias filter).  ``sensitivity``: probe -> its
+    true sensitivity over the one the rig file gives (1.02: reads 2 % high);
+    ``angle_error_deg``: probe -> how far its true mounting angle is from the rig file's.
     """
     def per_plane(v, plane) -> float:
         return float(v.get(plane, 0.0)) if isinstance(v, Mapping) else float(v)
@@ -149,7 +153,8 @@ def simulate_rig(
     mark = {pl: float(rng_art.uniform(0, 2 * math.pi)) for pl in rig.plane_names}
     for p in rig.probes:
         r = per_plane(runout, p.plane) * np.exp(1j * math.radians(per_plane(runout_phase_deg, p.plane)))
-        metres = u * math.cos(p.angle) + v * math.sin(p.angle)
+        angle = p.angle + math.radians((angle_error_deg or {}).get(p.name, 0.0))
+        metres = (u * math.cos(angle) + v * math.sin(angle)) * (sensitivity or {}).get(p.name, 1.0)
         if rig.model == "tilt":
             metres = rig.planes[p.plane] * metres
         # the probe sees the track's runout at its own angle: phi - angle

@@ -173,7 +173,7 @@ def test_the_rig_simulators_artefacts_are_found_as_simulated(tmp_path):
     rig_path = tmp_path / "rig.json"
     rig_path.write_text(json.dumps({"keyphasor": "kp", "probes": {"x": 45, "y": -45}, "units": {"displacement": "um"}}))
     rig = load_rig(rig_path)
-    params = RotorParams(values={"k": 1.0, "c": 0.04, "tau": 0.005, "beta": 0.7},
+    params = RotorParams(ip=0.0, values={"k": 1.0, "c": 0.04, "tau": 0.005, "beta": 0.7},
                          effects=("stiffness", "viscous_damping", "unbalance"))
     run = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=400.0, rpm_to=3000.0, rpm_per_s=300.0,
                        sample_rate=5000.0, noise=0.5, lines=((60.0, 0.8),), scratch=2.0, seed=11)

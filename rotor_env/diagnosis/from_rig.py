@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -96,6 +96,9 @@ class RigDiagnosis(Result):
     band_rpm: tuple[float, float] | None = None  #: that part's speed band (rpm)
     #: the waveforms were diagnosed without the 1X vectors' second mode (module docstring)
     second_mode: bool = False
+    #: effects of the rotor's structure the 1X vectors name and the waveforms' fit, at its floor
+    #: without them, was tried with (:func:`check_by_waveforms`): their Wald tests there
+    vector_checks: dict = field(default_factory=dict)
     #: the 1X fit whose added mode was taken away: the vectors' own, or the same model with
     #: the roles of its two modes exchanged (:func:`exchanged_modes`)
     mode_fit: VectorFit | None = None
@@ -154,6 +157,7 @@ class RigDiagnosis(Result):
             d["notes"] += [f"{e}: named by the 1X vectors; the waveforms' fit is at its floor without it (its "
                            "response there is absorbed by the runout term, the unbalance and the segments' start "
                            "states): they neither confirm nor refute it" for e in byvec]
+            d["notes"] += list(self.refuted_by_waveforms.values())
         return d
 
     def summary(self) -> str:
@@ -225,7 +229,24 @@ class RigDiagnosis(Result):
             # waveforms' one model named for the change, the vectors' would name for it too)
             return []
         lib = library_effects()
-        return [e for e in self.vectors.missing if e in lib and e not in d.missing]
+        refuted = self.refuted_by_waveforms
+        return [e for e in self.vectors.missing if e in lib and e not in d.missing and e not in refuted]
+
+    @property
+    def refuted_by_waveforms(self) -> dict[str, str]:
+        """Effects of the rotor's structure the 1X vectors name that the waveforms' fit, tried
+        with them (:func:`check_by_waveforms`), does not find: each with the sentence."""
+        out = {}
+        for e, c in self.vector_checks.items():
+            if not c["significant"]:
+                size = ", ".join(f"{k} = {v:.3g}" for k, v in c["vectors"].items())
+                got = ", ".join(f"{k} = {v:.3g}" for k, v in c["values"].items())
+                out[e] = (f"{e}: named by the 1X vectors ({size}); the waveforms' fit with it reads {got}, not "
+                          f"significant (HAC Wald log10 p = {c['log10_p']:.3g}, level {c['level']:.3g}): not named "
+                          "(a difference of the probes' sensitivities or angles makes the 1X orbit elliptical at "
+                          "every speed, which the vectors' model reads as a support anisotropy and the waveforms' "
+                          "calibration term takes)")
+        return out
 
     @property
     def change_when(self) -> dict | None:
@@ -361,6 +382,11 @@ def diagnose_rig(
     progress: bool = False,
 ) -> RigDiagnosis:
     """Diagnose a rig recording (see the module docstring)."""
+    return check_by_waveforms(_diagnose(record, model, candidates=candidates, alpha=alpha, progress=progress), alpha)
+
+
+def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[str] | None, alpha: float,
+              progress: bool) -> RigDiagnosis:
     from ..progress import step
 
     ip = record.rig.ip
@@ -450,6 +476,41 @@ def diagnose_rig(
         f"lacks; without its 1X response, on the band where the other mode carries the response, the waveforms "
         f"are still {' and '.join(tried)} the floor (each mode taken as the model's in turn): not explained "
         "either way"))), vd, plain.diagnosis, w_ref)
+
+
+def check_by_waveforms(rd: RigDiagnosis, alpha: float = 0.05) -> RigDiagnosis:
+    """``rd`` with the waveforms' word on what only the 1X vectors name.
+
+    Where the waveforms' fit stands at its floor and named nothing, it never tried the
+    candidates (the search stops at the floor), and an effect of the rotor's structure the
+    1X vectors name would stand on their word alone.  Each is added to the waveforms' final
+    model, started at the vectors' value, and its HAC Wald test read at the diagnosis's
+    level (Bonferroni over those tried): significant, the waveforms confirm it; not, they
+    refute it -- the waveforms hold the same 1X, and their model carries the probes'
+    calibration, which the vectors' model lacks."""
+    from .oe_diagnosis import CONVERGE_ITERATIONS, EXPLAINED_RATIO
+    from .output_error import fit_output_error, library_effects
+
+    d = rd.diagnosis
+    if not isinstance(d, OutputErrorDiagnosis) or d.rms_ratio_after > EXPLAINED_RATIO or d.added:
+        return rd
+    lib = library_effects()
+    fit = rd.vectors.after
+    values = fit.values()
+    tried = [e for e in rd.vectors.missing
+             if e in lib and e not in d.missing and e in fit.structural and e not in d.after.effects]
+    checks = {}
+    for e in tried:
+        try:
+            f = fit_output_error(d.after.grid, (*d.after.effects, e), {e: values.get(e, {})}, previous=d.after,
+                                 max_iter=CONVERGE_ITERATIONS)
+        except FloatingPointError:
+            continue
+        _, q, lp = f.wald(e)
+        level = math.log10(alpha / len(tried))
+        checks[e] = {"log10_p": lp, "q": q, "level": level, "significant": bool(lp < level),
+                     "values": f.parameters(e), "vectors": dict(values.get(e, {}))}
+    return replace(rd, vector_checks=checks) if checks else rd
 
 
 def _without_second_mode(record: RigRecord, fit: VectorFit) -> tuple[RigRecord, tuple[float, float] | None]:

@@ -116,9 +116,15 @@ GRID_PER_TURN = 24
 #: 2X pattern of the two axes, four terms).  Subtracting the slow-roll revolutions instead would take a cracked shaft's own
 #: slow-roll 1X and 2X under its static load with it; fitted with the model, only what is
 #: the same at every speed is taken, and the crack's 2X resonance at half the critical stays.
+#: The last two are the probes' **calibration**: two probes of a plane whose sensitivities
+#: differ by ``2 d`` (API 670 allows 5 % each) or whose angles are off by ``g1``, ``g2`` read the
+#: orbit ``z`` as ``z (1 + ...) + eps conj(z)`` with ``eps = (d + i (g1 - g2) / 2) e^{2 i a1}``: a
+#: backward whirl that follows the forward one at every speed (a support anisotropy's changes
+#: through the critical), and ``z + eps conj(z)`` is fitted with every model (a 4 % sensitivity
+#: difference read as ``support_anisotropy``).
 OUTPUT_TERMS = ("offset_x", "offset_y", "runout_cos", "runout_sin",
                 "runout2_x_cos", "runout2_x_sin", "runout2_y_cos", "runout2_y_sin",
-                "runout_back_cos", "runout_back_sin")
+                "runout_back_cos", "runout_back_sin", "calibration_re", "calibration_im")
 N_OFFSETS = len(OUTPUT_TERMS)
 #: a fit with a ``give_up_above`` stops where, at its last step's fall, it would need this
 #: many times the steps left to come down to that level (the steps of a Levenberg-Marquardt
@@ -715,6 +721,21 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, m
     # the output's nuisance terms (OUTPUT_TERMS): static offsets (x, y); a probe track's 1X
     # runout R e^{i phi} + R_b e^{-i phi} in z = th_y + i th_x (any 1X pattern on each axis);
     # its 2X, any pattern of 2 phi on each axis
+    # the probes' calibration first (it acts on the rotor's orbit, not on the track's runout):
+    # z + eps conj(z) with z = th_y + i th_x, eps = a + i b -- th_y += a th_y + b th_x,
+    # th_x += b th_y - a th_x; every column of the orbit's Jacobian the same way
+    a, b = float(offset[10]), float(offset[11])
+    xm, ym = pred[inside, 0].copy(), pred[inside, 1].copy()
+    if a or b:
+        jx, jy = jac[inside, 0, :], jac[inside, 1, :]
+        jac[inside, 0, :] = (1.0 - a) * jx + b * jy
+        jac[inside, 1, :] = (1.0 + a) * jy + b * jx
+        pred[inside, 0] = (1.0 - a) * xm + b * ym
+        pred[inside, 1] = (1.0 + a) * ym + b * xm
+    jac[inside, 0, npar + 10] = -xm
+    jac[inside, 1, npar + 10] = ym
+    jac[inside, 0, npar + 11] = ym
+    jac[inside, 1, npar + 11] = xm
     s, c, c2, s2 = grid.output_basis
     pred[inside, 0] += (offset[0] + offset[2] * s + offset[3] * c + offset[4] * c2 + offset[5] * s2
                         - offset[8] * s + offset[9] * c)
