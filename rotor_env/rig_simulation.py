@@ -151,6 +151,12 @@ def simulate_rig(
             raise ValueError(f"lines: ({f_hz!r}, {amp!r}) is not a (positive frequency in Hz, amplitude) pair")
     line_phase = {(p.name, j): float(rng_art.uniform(0, 2 * math.pi)) for p in rig.probes for j in range(len(lines))}
     mark = {pl: float(rng_art.uniform(0, 2 * math.pi)) for pl in rig.plane_names}
+    # the scratch's orders as the acquisition's anti-alias filter passes them: those below 0.4
+    # of the sample rate at each instant (sampled as it is, its orders above Nyquist would fold
+    # back into the band as noise no rig records)
+    rev_hz = np.abs(meas.phi_dot) * w_ref / (2 * math.pi)
+    scratch_passed = [(order, c, order * rev_hz < 0.4 * sample_rate)
+                      for order, c in enumerate(SCRATCH_ORDERS[1:], start=1)] if scratch else []
     for p in rig.probes:
         r = per_plane(runout, p.plane) * np.exp(1j * math.radians(per_plane(runout_phase_deg, p.plane)))
         angle = p.angle + math.radians((angle_error_deg or {}).get(p.name, 0.0))
@@ -162,15 +168,10 @@ def simulate_rig(
         reading_um = reading_um + rng.normal(0.0, noise * _unit_um(rig), len(t)) if noise > 0 else reading_um
         for j, (f_hz, amp) in enumerate(lines):
             reading_um = reading_um + amp * _unit_um(rig) * np.cos(2 * math.pi * f_hz * t + line_phase[p.name, j])
-        if scratch:
-            # a raised cosine a twelfth of a turn wide, centred on the mark, under the probe, as
-            # the acquisition's anti-alias filter passes it: its orders below 0.4 of the sample
-            # rate at each instant (sampled as it is, its orders above Nyquist would fold back
-            # into the band as noise no rig records)
+        if scratch_passed:
+            # the scratch: a raised cosine a twelfth of a turn wide, centred on the mark, under the probe
             d = phi - p.angle - mark[p.plane]
-            rev_hz = np.abs(meas.phi_dot) * w_ref / (2 * math.pi)
-            for order, c in enumerate(SCRATCH_ORDERS[1:], start=1):
-                passed = order * rev_hz < 0.4 * sample_rate
+            for order, c, passed in scratch_passed:
                 reading_um = reading_um + scratch * _unit_um(rig) * c * np.cos(order * d) * passed
         if rig.displacement in ("V", "mV"):
             volts_mv = reading_um * rig.sensitivity_mv_per_um + GAP_VOLTS * 1000.0

@@ -53,7 +53,7 @@ import numpy as np
 from identifier.breaks import MAX_BLOCKS, MIN_BLOCKS_PER_PARAMETER, sup_lm_test
 from identifier.hac import andrews_bandwidth, long_run_covariance
 
-from .output_error import OutputErrorFit, sample_scores
+from .output_error import CALIBRATION_TERMS, OutputErrorFit, sample_scores
 
 __all__ = ["TRIM", "ParameterChange", "parameter_constancy", "sup_lm_distribution"]
 
@@ -183,8 +183,8 @@ def parameter_constancy(fit: OutputErrorFit, *, alpha: float = 0.05, explained: 
     # nor the probes' calibration: a sensitivity does not change within a run, and its two
     # scores share the orbit's backward 1X with a crack that opens (tested with them, a crack
     # appearing at 45 % of a record was dated at 54 %)
-    keep = (ss > 1e-300 * max(float(np.max(ss)), 1e-300)) & np.array(
-        [not nm.startswith("output.calibration") for nm in names])
+    calibration = {f"output.{n}" for n in CALIBRATION_TERMS}
+    keep = (ss > 1e-300 * max(float(np.max(ss)), 1e-300)) & np.array([nm not in calibration for nm in names])
     sc, J, names = sc[:, keep], J[:, :, keep], tuple(nm for nm, k in zip(names, keep, strict=True) if k)
     n, p = sc.shape
     owners = [nm.split(".", 1)[0].replace("output", "the probes' offsets and runout") for nm in names]

@@ -500,6 +500,7 @@ def check_by_waveforms(rd: RigDiagnosis, alpha: float = 0.05) -> RigDiagnosis:
     tried = [e for e in rd.vectors.missing
              if e in lib and e not in d.missing and e in fit.structural and e not in d.after.effects]
     checks = {}
+    level = math.log10(alpha / max(len(tried), 1))
     for e in tried:
         try:
             f = fit_output_error(d.after.grid, (*d.after.effects, e), {e: values.get(e, {})}, previous=d.after,
@@ -507,7 +508,6 @@ def check_by_waveforms(rd: RigDiagnosis, alpha: float = 0.05) -> RigDiagnosis:
         except FloatingPointError:
             continue
         _, q, lp = f.wald(e)
-        level = math.log10(alpha / len(tried))
         checks[e] = {"log10_p": lp, "q": q, "level": level, "significant": bool(lp < level),
                      "values": f.parameters(e), "vectors": dict(values.get(e, {}))}
     return replace(rd, vector_checks=checks) if checks else rd

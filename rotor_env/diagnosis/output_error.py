@@ -126,6 +126,9 @@ OUTPUT_TERMS = ("offset_x", "offset_y", "runout_cos", "runout_sin",
                 "runout2_x_cos", "runout2_x_sin", "runout2_y_cos", "runout2_y_sin",
                 "runout_back_cos", "runout_back_sin", "calibration_re", "calibration_im")
 N_OFFSETS = len(OUTPUT_TERMS)
+#: the probes' calibration among the output terms (real and imaginary part of ``eps``)
+CALIBRATION_TERMS = ("calibration_re", "calibration_im")
+_CAL = OUTPUT_TERMS.index(CALIBRATION_TERMS[0])
 #: a fit with a ``give_up_above`` stops where, at its last step's fall, it would need this
 #: many times the steps left to come down to that level (the steps of a Levenberg-Marquardt
 #: fit that crawls along a valley fall less and less, never more by ten)
@@ -718,13 +721,10 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, m
     status = kernel.module.shoot(grid.t, grid.phi, grid.phid, grid.segments, x0, theta, arg, active,
                                  pidx, midx, qidx, qlo, qhi, grid.ip, grid.substeps, pred, jac)
     inside = grid.inside
-    # the output's nuisance terms (OUTPUT_TERMS): static offsets (x, y); a probe track's 1X
-    # runout R e^{i phi} + R_b e^{-i phi} in z = th_y + i th_x (any 1X pattern on each axis);
-    # its 2X, any pattern of 2 phi on each axis
     # the probes' calibration first (it acts on the rotor's orbit, not on the track's runout):
     # z + eps conj(z) with z = th_y + i th_x, eps = a + i b -- th_y += a th_y + b th_x,
     # th_x += b th_y - a th_x; every column of the orbit's Jacobian the same way
-    a, b = float(offset[10]), float(offset[11])
+    a, b = float(offset[_CAL]), float(offset[_CAL + 1])
     xm, ym = pred[inside, 0].copy(), pred[inside, 1].copy()
     if a or b:
         jx, jy = jac[inside, 0, :], jac[inside, 1, :]
@@ -732,10 +732,13 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, m
         jac[inside, 1, :] = (1.0 + a) * jy + b * jx
         pred[inside, 0] = (1.0 - a) * xm + b * ym
         pred[inside, 1] = (1.0 + a) * ym + b * xm
-    jac[inside, 0, npar + 10] = -xm
-    jac[inside, 1, npar + 10] = ym
-    jac[inside, 0, npar + 11] = ym
-    jac[inside, 1, npar + 11] = xm
+    jac[inside, 0, npar + _CAL] = -xm
+    jac[inside, 1, npar + _CAL] = ym
+    jac[inside, 0, npar + _CAL + 1] = ym
+    jac[inside, 1, npar + _CAL + 1] = xm
+    # the other output terms: static offsets (x, y); a probe track's 1X runout
+    # R e^{i phi} + R_b e^{-i phi} in z = th_y + i th_x (any 1X pattern on each axis); its 2X,
+    # any pattern of 2 phi on each axis
     s, c, c2, s2 = grid.output_basis
     pred[inside, 0] += (offset[0] + offset[2] * s + offset[3] * c + offset[4] * c2 + offset[5] * s2
                         - offset[8] * s + offset[9] * c)

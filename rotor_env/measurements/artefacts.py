@@ -15,19 +15,19 @@ Two artefacts that every rig's probes carry and no rotor model holds:
    those share orders with the unbalance, bow and crack and must be fitted with them);
    orders 3 and up belong to no linear rotor's response away from its own resonances.
 
-**Lines.**  The record is cut into :data:`SEGMENTS` equal stretches.  In each, the
-Hann-windowed spectrum of every probe is divided by its running median (the local
-background); a bin is a line candidate in a stretch where it stands :data:`LINE_RATIO`
-times above that background (a bin of Gaussian noise does so with probability
-``2**-LINE_RATIO``) and no shaft order ``1..`` of the stretch's speeds comes near it (the
-shaft's own response, whatever its frequency, is never taken).  A line is a frequency that
-is a candidate in *every* stretch where no order comes near it, at least three of them.
+**Lines.**  The record is cut into :data:`SEGMENTS` equal stretches; in each, the
+Hann-windowed spectrum of every probe over its running median (the local background).  A
+frequency is a line where it stands :data:`LINE_RATIO` above that background (a bin of
+Gaussian noise does so with probability ``2**-LINE_RATIO``) in every stretch whose shaft 1X
+and 2X keep clear of it, and where at least one stretch has no shaft order near it (a shaft
+at constant speed keeps its orders at one frequency each: never a line; :func:`find_lines`).
 Its frequency is refined (the coherent sum over the stretches), and its complex amplitude
-estimated stretch by stretch; a **deterministic** line has the same amplitude and phase in
-every stretch (:data:`MIN_COHERENCE`): the random response of a lightly damped mode
-excited by broadband forces, a narrow peak too, has a new phase in every stretch and is
-left alone.  The line is subtracted over the whole record with its amplitude interpolated
-between the stretches' centres (a slowly drifting hum).
+estimated stretch by stretch, a stretch that strays from their median (a fault's harmonic
+crossing it) left out; a **deterministic** line has the same amplitude and phase in every
+stretch (:data:`MIN_COHERENCE`): the random response of a lightly damped mode excited by
+broadband forces, a narrow peak too, has a new phase in every stretch and is left alone.
+The line is subtracted over the whole record with its amplitude interpolated between the
+stretches' centres (a slowly drifting hum).
 
 **Runout above 2X.**  Each probe's vectors at orders 3..:data:`TOP_RUNOUT_ORDER` are
 tracked over windows of a few revolutions; the pattern fixed to the shaft is the median over
@@ -83,13 +83,21 @@ class FixedLine:
     """A sinusoid at a fixed frequency in the probes' readings (not the shaft's)."""
 
     frequency_hz: float
-    amplitude: dict[str, float]  #: probe -> mean amplitude (zero-to-peak, the readings' unit)
     coherence: float  #: |mean stretch amplitude| / rms of the stretch amplitudes (1: steady)
-    stretches: int  #: stretches whose amplitude was read (clear of the shaft's 1X and 2X, not disturbed)
-    #: the times (s) of those stretches' centres and each probe's complex amplitude there
+    #: the times (s) of the centres of the stretches its amplitude was read in (clear of the
+    #: shaft's 1X and 2X, not disturbed) and each probe's complex amplitude there
     #: (``x = Re(a e^{2 pi i f t})``): the line's course, interpolated between them
-    centres: np.ndarray = None
-    stretch_amplitudes: dict[str, np.ndarray] = None
+    centres: np.ndarray
+    stretch_amplitudes: dict[str, np.ndarray]
+
+    @property
+    def stretches(self) -> int:
+        return len(self.centres)
+
+    @property
+    def amplitude(self) -> dict[str, float]:
+        """Probe -> mean amplitude (zero-to-peak, the readings' unit)."""
+        return {nm: float(abs(np.mean(a))) for nm, a in self.stretch_amplitudes.items()}
 
     def wave(self, t: np.ndarray, probe: str) -> np.ndarray:
         """The line in ``probe``'s reading at the times ``t`` (amplitude interpolated between
@@ -156,6 +164,7 @@ def find_lines(t: np.ndarray, speed_hz: np.ndarray, readings: dict[str, np.ndarr
     bin_hz = fs / m
     guard = ORDER_GUARD_BINS * bin_hz
     w = np.hanning(m)
+    sum_w = float(np.sum(w))
     inside = (freqs >= 4 * bin_hz) & (freqs <= freqs[-1] - 4 * bin_hz)
     clear12, clear_all = [], np.zeros(len(freqs), dtype=bool)
     for a, b in segs:
@@ -190,12 +199,12 @@ def find_lines(t: np.ndarray, speed_hz: np.ndarray, readings: dict[str, np.ndarr
         sel = [s for s, c in zip(segs, clear12[:, k0], strict=True) if c]
         jsel = [j for j, c in enumerate(clear12[:, k0]) if c]
         f = _refine(t, centred, sel, float(freqs[g[0]]), float(freqs[g[-1]]), bin_hz)
-        amps, per, keep_all = {}, {}, np.ones(len(sel), dtype=bool)
+        per, keep_all = {}, np.ones(len(sel), dtype=bool)
         for nm in names:
             a = _stretch_amplitudes(t, centred[nm], sel, f)
             med = complex(np.median(a.real), np.median(a.imag))
             # a stretch's noise on the amplitude: 2 sqrt(E|X|^2) / sum(w), E|X|^2 = median / ln 2
-            se = np.array([2.0 * math.sqrt(background[nm, j][k0] / math.log(2.0)) / np.sum(w) for j in jsel])
+            se = np.array([2.0 * math.sqrt(background[nm, j][k0] / math.log(2.0)) / sum_w for j in jsel])
             keep_all &= np.abs(a - med) <= np.maximum(0.2 * abs(med), 5.0 * se)
             per[nm] = a
         if keep_all.sum() < MIN_CLEAR_SEGMENTS:
@@ -204,7 +213,6 @@ def find_lines(t: np.ndarray, speed_hz: np.ndarray, readings: dict[str, np.ndarr
         for nm in names:
             a = per[nm][keep_all]
             per[nm] = a
-            amps[nm] = float(abs(np.mean(a)))
             rms = math.sqrt(float(np.mean(np.abs(a) ** 2)))
             coh.append((abs(np.mean(a)) / rms if rms > 0 else 0.0, rms))
         # the probe that carries most of it says whether it is steady
@@ -212,7 +220,7 @@ def find_lines(t: np.ndarray, speed_hz: np.ndarray, readings: dict[str, np.ndarr
         if coherence < MIN_COHERENCE:
             continue
         centres = np.array([0.5 * (t[a] + t[b - 1]) for (a, b), k in zip(sel, keep_all, strict=True) if k])
-        lines.append(FixedLine(f, amps, float(coherence), int(keep_all.sum()), centres, per))
+        lines.append(FixedLine(f, float(coherence), centres, per))
     return lines
 
 
