@@ -33,6 +33,7 @@ against probe noise, the per-fault table, every failure, the time per record.
     python benchmarks/rig_suite.py --reps 1 --workers 2       # 4 noises x 13 kinds
     python benchmarks/rig_suite.py --noise 0.3 --faults asymmetry,rub --reps 3
     python benchmarks/rig_suite.py --noise 0.5 --artefacts    # with mains hum and a scratch on every track
+    python benchmarks/rig_suite.py --noise 0.5 --drift 20     # the probes' mean moving by 20 um (centreline, thermal)
     python benchmarks/rig_suite.py --report seed1.json seed2.json   # the tables of saved runs together
 """
 
@@ -100,6 +101,9 @@ class RecordSpec:
     #: instrument artefacts on the probes (``--artefacts``): mains hum at 50 or 60 Hz with its
     #: third harmonic, and a scratch on every track
     artefacts: bool = False
+    #: the probes' slowly moving mean (``--drift``, um): each plane's centreline lifting with
+    #: the speed squared by this much, each probe's gap drifting linearly by up to half of it
+    drift_um: float = 0.0
 
 
 def build_specs(noises=NOISES_UM, kinds=KINDS, reps: int = 1, seed: int = 0, quick: bool = False) -> list[RecordSpec]:
@@ -251,6 +255,8 @@ def make_record(spec: RecordSpec, folder: Path) -> tuple[Path, Path, dict]:
         mains = float(rng.choice([50.0, 60.0]))
         art = {"lines": ((mains, float(rng.uniform(0.3, 1.5))), (3 * mains, float(rng.uniform(0.1, 0.5)))),
                "scratch": float(rng.uniform(1.0, 4.0))}
+    if spec.drift_um:
+        art["drift"] = spec.drift_um
     run = simulate_rig(rig, _params(healthy, extra, rig.ip), **run_kw, noise=spec.noise_um, runout=runout,
                        runout_phase_deg=runout_deg, seed=spec.seed, **art)
     faulty_peak = _orbit_peak(simulate_rig(rig, _params(healthy, extra, rig.ip), **run_kw, noise=0.0), rig) \
@@ -408,12 +414,13 @@ def detection_table(outcomes: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def _row_key(o: dict) -> tuple[float, bool]:
-    return o["spec"]["noise_um"], bool(o["spec"].get("artefacts"))
+def _row_key(o: dict) -> tuple[float, bool, float]:
+    return o["spec"]["noise_um"], bool(o["spec"].get("artefacts")), float(o["spec"].get("drift_um") or 0.0)
 
 
-def _row_label(key: tuple[float, bool]) -> str:
-    return f"{key[0]:g}" + (" + hum, scratch" if key[1] else "")
+def _row_label(key: tuple[float, bool, float]) -> str:
+    return (f"{key[0]:g}" + (" + hum, scratch" if key[1] else "")
+            + (f" + {key[2]:g} drift" if key[2] else ""))
 
 
 def per_fault_table(outcomes: list[dict]) -> str:
@@ -495,6 +502,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--artefacts", action="store_true",
                     help="instrument artefacts on every record: mains hum (50 or 60 Hz, 0.3-1.5 um, and its third "
                          "harmonic) and a scratch on every track (1-4 um)")
+    ap.add_argument("--drift", type=float, default=0.0, metavar="UM",
+                    help="the probes' slowly moving mean on every record: each plane's centreline lifting by UM with "
+                         "the speed squared, each probe's gap drifting linearly by up to UM/2")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2, help="worker processes (one BLAS thread each)")
     ap.add_argument("--out", default="rig_suite.json", help="JSON of every outcome (rewritten after each record)")
@@ -537,6 +547,12 @@ def main(argv: list[str] | None = None) -> int:
         from dataclasses import replace
 
         specs = [replace(s, artefacts=True) for s in specs]
+    if args.drift:
+        from dataclasses import replace
+
+        if not (math.isfinite(args.drift) and args.drift > 0):
+            ap.error(f"--drift: a positive number of um, got {args.drift}")
+        specs = [replace(s, drift_um=args.drift) for s in specs]
     if args.medium:
         # a subset of the full plan (same indices and seeds): what a loaded 2-core machine
         # diagnoses in about half an hour

@@ -76,6 +76,7 @@ def simulate_rig(
     scratch: float = 0.0,
     sensitivity: Mapping[str, float] | None = None,
     angle_error_deg: Mapping[str, float] | None = None,
+    drift: float = 0.0,
     seed: int | None = None,
 ) -> RigRun:
     """Simulate a start-up (``rpm_per_s > 0``) or coast-down (``< 0``) as the rig records it.
@@ -96,6 +97,11 @@ def simulate_rig(
     of the sample rate: the acquisition's anti-alias filter).  ``sensitivity``: probe -> its
     true sensitivity over the one the rig file gives (1.02: reads 2 % high);
     ``angle_error_deg``: probe -> how far its true mounting angle is from the rig file's.
+    ``drift``: the probes' slowly moving mean (:mod:`rotor_env.measurements.drift` takes it
+    out), in the rig's displacement unit: each plane's shaft centreline moves by this much,
+    in a direction of its own, as the square of the speed over the top speed (a shaft lifting
+    on fluid-film bearings), and each probe's gap drifts linearly over the record by up to
+    half of it (thermal growth).
     """
     def per_plane(v, plane) -> float:
         return float(v.get(plane, 0.0)) if isinstance(v, Mapping) else float(v)
@@ -155,6 +161,12 @@ def simulate_rig(
     # of the sample rate at each instant (sampled as it is, its orders above Nyquist would fold
     # back into the band as noise no rig records)
     rev_hz = np.abs(meas.phi_dot) * w_ref / (2 * math.pi)
+    if not math.isfinite(drift):
+        raise ValueError(f"drift must be a finite number, got {drift!r}")
+    lift = (rev_hz / max(float(np.max(rev_hz)), 1e-300)) ** 2
+    lift_dir = {pl: float(rng_art.uniform(0, 2 * math.pi)) for pl in rig.plane_names}
+    thermal = {p.name: float(rng_art.uniform(-0.5, 0.5)) for p in rig.probes}
+    ramp = (t - t[0]) / max(float(t[-1] - t[0]), 1e-300)
     scratch_passed = [(order, c, order * rev_hz < 0.4 * sample_rate)
                       for order, c in enumerate(SCRATCH_ORDERS[1:], start=1)] if scratch else []
     for p in rig.probes:
@@ -166,6 +178,9 @@ def simulate_rig(
         # the probe sees the track's runout at its own angle: phi - angle
         reading_um = metres / 1e-6 + np.real(r * np.exp(1j * (phi - p.angle))) * _unit_um(rig)
         reading_um = reading_um + rng.normal(0.0, noise * _unit_um(rig), len(t)) if noise > 0 else reading_um
+        if drift:
+            reading_um = reading_um + drift * _unit_um(rig) * (
+                lift * math.cos(p.angle - lift_dir[p.plane]) + thermal[p.name] * (2.0 * ramp - 1.0))
         for j, (f_hz, amp) in enumerate(lines):
             reading_um = reading_um + amp * _unit_um(rig) * np.cos(2 * math.pi * f_hz * t + line_phase[p.name, j])
         if scratch_passed:

@@ -55,6 +55,7 @@ import numpy as np
 
 from ..effects import EFFECTS
 from ..measurements.artefacts import remove_artefacts
+from ..measurements.drift import drift_knot_spacing, remove_drift
 from ..measurements.rig import SPEED_UNITS
 from ..measurements.waveforms import LENGTH_UNIT, RigRecord, WaveformError
 from ..results import Result
@@ -393,7 +394,11 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
     step("instrument artefacts: lines at fixed frequencies, runout above 2X")
     record = remove_artefacts(record)
     step("1X vectors: order tracking and the synchronous fit")
-    vd = diagnose_vectors(record.vectors((1,)), ip=ip, alpha=alpha)
+    # the vectors from the record less the probes' slowly moving mean (the turn means take no
+    # order of the shaft); the waveforms' fit carries that mean with every model instead, so
+    # that a model's own slow response (a cracked shaft's mean deflection under its load
+    # changes with the speed) is fitted, not taken out of the data alone
+    vd = diagnose_vectors(remove_drift(record).vectors((1,)), ip=ip, alpha=alpha)
     if RUNOUT in vd.missing and record.rig.slow_roll_rpm is None:
         # runout seen in the 1X vectors: the waveforms' output-error fit carries a probe
         # track's 1X pattern fixed to the shaft with every model.  The slow-roll pattern is
@@ -598,9 +603,12 @@ def waveform_grid(record: RigRecord, w_ref: float) -> tuple[ShootingGrid, float]
         keep = np.ones_like(ph, dtype=bool)
     t = (record.t[keep] - record.t[keep][0]) * w_ref
     phi, speed = smooth_spin(record.t[keep], ph[keep])
+    # the probes' slowly moving mean (the shaft's centreline on its bearings, thermal drift)
+    # fitted with every model: splines a few revolutions of the slowest speed apart
+    spacing = drift_knot_spacing(record.t[keep], record.speed[keep]) * w_ref
     grid = ShootingGrid.from_arrays(t, phi, speed / w_ref, record.v[keep] / scale,
                                     record.u[keep] / scale, record.rig.ip, noise_std=max(sigma / scale, 1e-15),
-                                    noise_rho=rho)
+                                    noise_rho=rho, baseline_spacing=spacing if spacing > 0 else None)
     return grid, scale
 
 

@@ -481,14 +481,18 @@ class ShootingGrid:
     #: the noise's integrated correlation time on the grid, in grid samples (sum over every lag
     #: of its autocorrelation: 1 for white, (1 + rho) / (1 - rho) for AR(1) at its own rate)
     noise_correlation: float = 1.0
+    #: knot spacing (model time) of the probes' slowly moving mean fitted with every model
+    #: (:func:`_baseline_fit`); ``None``: only the static offsets
+    baseline_spacing: float | None = None
 
     @classmethod
     def from_arrays(cls, t, phi, phid, th_x, th_y, ip: float, *, noise_std: float | None = None,
                     noise_rho: float = 0.0, segment_length: float = SEGMENT_LENGTH,
-                    grid_dt: float | None = None) -> ShootingGrid:
+                    grid_dt: float | None = None, baseline_spacing: float | None = None) -> ShootingGrid:
         """Decimate (zero-phase FIR) to the grid step and cut the segments.  ``noise_std``: the
         noise's standard deviation per sample of the input, ``noise_rho`` its lag-one
-        correlation (AR(1); 0: white)."""
+        correlation (AR(1); 0: white); ``baseline_spacing``: knot spacing (same time unit as
+        ``t``) of the probes' slowly moving mean fitted with every model (``None``: none)."""
         from scipy.signal import resample_poly, savgol_filter
 
         t = np.asarray(t, float)
@@ -546,8 +550,11 @@ class ShootingGrid:
             want = 0.3 * sigma / amp
             while nsub < 8 and omega * segment_length * (omega * dt / nsub) ** 4 / 120.0 > want:
                 nsub += 1
+        if baseline_spacing is not None and not (math.isfinite(baseline_spacing) and baseline_spacing > 0):
+            raise ValueError(f"baseline_spacing must be a positive number, got {baseline_spacing!r}")
         return cls(t, np.asarray(phi, float), np.asarray(phid, float), y, rates, seg, float(ip), sigma, q,
-                   None if noise_std is None else float(noise_std), nsub, tau)
+                   None if noise_std is None else float(noise_std), nsub, tau,
+                   None if baseline_spacing is None else float(baseline_spacing))
 
     @property
     def n(self) -> int:
@@ -567,6 +574,24 @@ class ShootingGrid:
         terms' columns (:data:`OUTPUT_TERMS`), the same at every shot of a fit."""
         phi = self.phi[self.inside]
         return np.sin(phi), np.cos(phi), np.cos(2 * phi), np.sin(2 * phi)
+
+    @cached_property
+    def baseline_basis(self):
+        """``(B, G)``: the cubic B-splines of the slowly moving mean at the samples in a segment
+        (sparse, knots :attr:`baseline_spacing` apart, the last interval stretched to the
+        end) and the Cholesky factor of their Gram matrix ``B'B``; ``None`` without a baseline."""
+        if self.baseline_spacing is None:
+            return None
+        from scipy.interpolate import BSpline
+        from scipy.linalg import cho_factor
+
+        t = self.t[self.inside]
+        t0, t1 = float(t[0]), float(t[-1])
+        n_int = max(1, int(math.floor((t1 - t0) / self.baseline_spacing)))
+        knots = np.concatenate([[t0] * 3, np.linspace(t0, t1, n_int + 1), [t1] * 3])
+        B = BSpline.design_matrix(t, knots, 3).tocsr()
+        G = (B.T @ B).toarray()
+        return B, cho_factor(G + 1e-12 * np.trace(G) / len(G) * np.eye(len(G)))
 
     def start_states(self) -> np.ndarray:
         i = self.segments[:, 0]
@@ -706,6 +731,16 @@ def _moment_layout(kernel: _Kernel, effects: Sequence[str]) -> np.ndarray:
     return np.asarray([j for e in effects for j in range(*kernel.coef_slots[e])], dtype=np.int64)
 
 
+def _baseline_fit(grid, r: np.ndarray) -> np.ndarray:
+    """The least-squares fit of the slowly moving mean (:attr:`ShootingGrid.baseline_basis`)
+    to ``r``, rows of the samples in a segment (any number of columns, one channel's
+    samples each)."""
+    from scipy.linalg import cho_solve
+
+    B, G = grid.baseline_basis
+    return B @ cho_solve(G, B.T @ r)
+
+
 def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, midx=None):
     """Predictions and Jacobian columns: the free coefficients (``pidx``), arguments, the
     output terms (:data:`OUTPUT_TERMS`), then the segment's start state; the moment is that
@@ -758,6 +793,13 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, m
     jac[inside, 1, npar + 8] = c
     jac[inside, 0, npar + 9] = c
     jac[inside, 1, npar + 9] = s
+    if grid.baseline_spacing is not None and status == 0:
+        # the probes' slowly moving mean (the shaft's centreline, thermal drift), projected
+        # out: the prediction takes the least-squares baseline of what it leaves, so the
+        # residual is orthogonal to the baseline's splines (variable projection).  The
+        # Jacobian stays the model's: with a projected residual its product J'r is the exact
+        # gradient; the covariance projects it (:func:`_project`)
+        pred[inside] += _baseline_fit(grid, grid.y[inside] - pred[inside])
     return status, pred, jac
 
 
@@ -829,9 +871,17 @@ def _project_rows(r, jac, seg, npq):
 
 def _project(grid, r, jac, npq):
     """Variable projection: the residual's and the parameters' rows of every segment of
-    ``grid`` on the complement of its start-state columns (:func:`_project_rows`)."""
-    return _project_rows(np.ascontiguousarray(r), np.ascontiguousarray(jac), np.ascontiguousarray(grid.segments),
-                         npq)
+    ``grid`` on the complement of its start-state columns (:func:`_project_rows`), then, on
+    a grid with a slowly moving mean, on the complement of its splines (each channel)."""
+    rt, Jt = _project_rows(np.ascontiguousarray(r), np.ascontiguousarray(jac), np.ascontiguousarray(grid.segments),
+                           npq)
+    if grid.baseline_spacing is not None:
+        # the segments' rows are the samples in a segment, in time order, two channels each
+        for ch in range(2):
+            both = np.column_stack([rt[ch::2], Jt[ch::2]])
+            both -= _baseline_fit(grid, both)
+            rt[ch::2], Jt[ch::2] = both[:, 0], both[:, 1:]
+    return rt, Jt
 
 
 def _noise_correlation_time(taps: np.ndarray | None, q: int, rho: float) -> float:
