@@ -55,7 +55,7 @@ import numpy as np
 
 from ..effects import EFFECTS
 from ..measurements.artefacts import remove_artefacts
-from ..measurements.drift import drift_knot_spacing, remove_drift
+from ..measurements.drift import drift_knot_spacing, drift_note, probe_drift, remove_drift
 from ..measurements.rig import SPEED_UNITS
 from ..measurements.waveforms import LENGTH_UNIT, RigRecord, WaveformError
 from ..results import Result
@@ -398,7 +398,10 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
     # order of the shaft); the waveforms' fit carries that mean with every model instead, so
     # that a model's own slow response (a cracked shaft's mean deflection under its load
     # changes with the speed) is fitted, not taken out of the data alone
-    vd = diagnose_vectors(remove_drift(record).vectors((1,)), ip=ip, alpha=alpha)
+    drift = probe_drift(record)
+    if drift.knot_spacing_s > 0:
+        record = replace(record, notes=(*record.notes, drift_note(drift, record.rig.amp_unit)))
+    vd = diagnose_vectors(remove_drift(record, drift).vectors((1,)), ip=ip, alpha=alpha)
     if RUNOUT in vd.missing and record.rig.slow_roll_rpm is None:
         # runout seen in the 1X vectors: the waveforms' output-error fit carries a probe
         # track's 1X pattern fixed to the shaft with every model.  The slow-roll pattern is

@@ -30,8 +30,22 @@ partial turn of a 100 um 1X (tens of um).  The baseline's own mean is left in th
 readings: the constant gap is the probes' business
 (:func:`~rotor_env.measurements.probes.to_model_axes`).
 
-What is removed is said in the record's notes (each probe's peak-to-peak, in the rig's
-unit, and the cut-off), and returned by :func:`probe_drift` for a centreline plot.
+**Fitted, not subtracted.**  The output-error fit carries the baseline with every model
+(:attr:`~rotor_env.diagnosis.output_error.ShootingGrid.baseline_spacing`: the prediction
+takes the least-squares spline of what it leaves, a variable projection), because a model
+can have a slow response of its own: a breathing crack under its static load deflects on
+average more or less as the speed changes.  Subtracted from the data alone, that went with
+the drift and the crack's fit lost it (the load 30 % off, the breathing depth 0.14 for 0.7);
+fitted with the model, only what the model does not predict is taken.  The 1X vectors, which
+read the shaft's orders only, are order-tracked from the record less its baseline
+(:func:`remove_drift`).  The movement is said in the record's notes (each probe's
+peak-to-peak of its two-turn means, in the rig's unit, and the spline's spacing), and
+:func:`probe_drift` returns it for a centreline plot.
+
+What it cannot take: a random walk of the electronics with power between the baseline's
+cut-off and the slowest 1X (a 1 um random walk over a 10 s record left 1.07-1.1x the floor on
+healthy records and 1.7x on a tilt rig, whose probes' difference doubles it): noise in the
+rotor's band that the band above does not show.
 """
 
 from __future__ import annotations
@@ -41,8 +55,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["DRIFT_REVOLUTIONS", "MEAN_REVOLUTIONS", "ProbeDrift", "drift_knot_spacing", "probe_drift", "remove_drift",
-           "turn_means"]
+__all__ = ["DRIFT_REVOLUTIONS", "MEAN_REVOLUTIONS", "ProbeDrift", "drift_knot_spacing", "drift_note", "probe_drift",
+           "remove_drift", "turn_means"]
 
 #: knot spacing of the baseline spline, in revolutions at the record's slowest speed
 DRIFT_REVOLUTIONS = 4.0
@@ -143,15 +157,23 @@ def probe_drift(record) -> ProbeDrift:
 
 
 def remove_drift(record, drift: ProbeDrift | None = None):
-    """``record`` with every probe's slowly moving mean (:func:`probe_drift`) taken out, the
-    removal said in its notes."""
+    """``record`` with every probe's slowly moving mean (:func:`probe_drift`) taken out.
+
+    For what reads the shaft's orders only (the 1X vectors): a model whose own mean response
+    moves with the speed (a cracked shaft's mean deflection under its load) must be fitted
+    with the baseline instead, as the output-error fit does."""
     from .probes import to_model_axes
 
     drift = probe_drift(record) if drift is None else drift
     readings = {nm: np.asarray(x, float) - drift.baseline[nm] for nm, x in record.readings.items()}
     u, v = to_model_axes(record.rig, readings)
+    return replace(record, readings=readings, u=u, v=v)
+
+
+def drift_note(drift: ProbeDrift, unit: str) -> str:
+    """What the record's slowly moving mean was and how the diagnosis took it."""
     ptp = ", ".join(f"{nm} {p:.3g}" for nm, p in drift.peak_to_peak.items())
-    note = (f"the probes' slowly moving mean (the shaft's centreline on its bearings, thermal growth, a drifting gap) "
-            f"taken out below {drift.cutoff_hz:.3g} Hz, a quarter of the slowest 1X ({drift.slowest_rpm:.0f} rpm): "
-            f"peak-to-peak {ptp} {record.rig.amp_unit}")
-    return replace(record, readings=readings, u=u, v=v, notes=(*record.notes, note))
+    return (f"the probes' slowly moving mean (the shaft's centreline on its bearings, thermal growth, a drifting "
+            f"gap) fitted with every model: splines {drift.knot_spacing_s:.3g} s apart ({DRIFT_REVOLUTIONS:g} turns "
+            f"at the slowest speed, {drift.slowest_rpm:.0f} rpm; half gain at {drift.cutoff_hz:.3g} Hz); its mean over "
+            f"two turns moved by {ptp} {unit} peak to peak")
