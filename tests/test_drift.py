@@ -117,7 +117,7 @@ def _diagnose(rig, run, tmp_path):
 
     path = tmp_path / "run.parquet"
     pq.write_table(pa.table(run.file_columns()), path)
-    return diagnose_rig(load_waveforms(path, rig), candidates=("asymmetry", "nonlinear_stiffness", "rub")).to_dict()
+    return diagnose_rig(load_waveforms(path, rig), candidates=("asymmetry", "nonlinear_stiffness", "rub"))
 
 
 def test_a_healthy_rig_whose_centreline_moves_is_explained(one_plane, tmp_path, monkeypatch):
@@ -132,13 +132,20 @@ def test_a_healthy_rig_whose_centreline_moves_is_explained(one_plane, tmp_path, 
                     effects=("stiffness", "viscous_damping", "unbalance"))
     run = simulate_rig(one_plane, p, natural_rpm=1800.0, rpm_from=600.0, rpm_to=3000.0, rpm_per_s=300.0,
                        sample_rate=2500.0, noise=0.5, drift=6.0, seed=3)
-    d = _diagnose(one_plane, run, tmp_path)
+    result = _diagnose(one_plane, run, tmp_path)
+    d = result.to_dict()
     assert d["verdict"] == "explained" and not d["missing"], (d["verdict"], d["missing"])
     assert d["rms_after"] / d["noise_floor"] < 1.05
     assert any("slowly moving mean" in n for n in d["notes"])
+    # the centreline plot among the record's figures; its path moves by what was drawn: the
+    # lift (5.8 um from 600 to 3000 rpm) and each gap's thermal drift (under 3 um)
+    written = result.save_figures(tmp_path / "figs")
+    assert (tmp_path / "figs" / "centreline.png") in written
+    xy = probe_drift(result.record).centreline(one_plane)["A"]
+    assert 5.8 - 3.0 < float(np.max(np.hypot(*(xy - xy[0]).T))) < 5.8 + 3.0
     # the control: no baseline
     monkeypatch.setattr(from_rig, "drift_knot_spacing", lambda t, speed: 0.0)
-    bare = _diagnose(one_plane, run, tmp_path)
+    bare = _diagnose(one_plane, run, tmp_path).to_dict()
     assert bare["rms_after"] / bare["noise_floor"] > 1.5
 
 
@@ -150,3 +157,29 @@ def test_simulate_rig_refuses_a_drift_that_is_not_a_number(one_plane):
     with pytest.raises(ValueError, match="drift"):
         simulate_rig(one_plane, p, rpm_from=600.0, rpm_to=900.0, rpm_per_s=300.0, sample_rate=1000.0,
                      drift=float("nan"))
+
+
+def test_the_centreline_is_the_planes_mean_position_from_its_probes(one_plane):
+    """Probes at +45 and -45 deg reading a shaft whose mean position moves along a known
+    path (a lift with the speed squared, turning across the clearance) under a 1X: the
+    centreline is that path (its mean removed), and its plot is labelled in the rig's units."""
+    t, phi, speed = _sweep()
+    lift = (speed / speed.max()) ** 2
+    u_true, v_true = 12.0 * lift * np.cos(0.3 + lift), 12.0 * lift * np.sin(0.3 + lift)
+    readings = {}
+    for p in one_plane.probes:
+        c, s = math.cos(p.angle), math.sin(p.angle)
+        readings[p.name] = (u_true * c + v_true * s) + 80.0 * np.cos(phi - p.angle)
+    drift = probe_drift(SimpleNamespace(t=t, phi=phi, speed=2 * math.pi * speed, readings=readings))
+    xy = drift.centreline(one_plane)["A"]
+    np.testing.assert_allclose(xy[:, 0], u_true - u_true.mean(), atol=0.05)
+    np.testing.assert_allclose(xy[:, 1], v_true - v_true.mean(), atol=0.05)
+    from rotor_env.plots import plot_centreline
+
+    fig = plot_centreline(60.0 * speed, drift.centreline(one_plane), unit=one_plane.amp_unit)
+    ax = fig.axes[0]
+    assert "um" in ax.get_xlabel() and "um" in ax.get_ylabel()
+    assert "rpm" in fig.axes[1].get_ylabel()  # the speed's colour bar
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)

@@ -50,6 +50,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -203,11 +204,30 @@ class RigDiagnosis(Result):
                                            overwrite=overwrite, speed_scale=self.w_ref / SPEED_UNITS["rpm"],
                                            speed_unit="speed [rpm]")
 
+    def plot_centreline(self, ax=None):
+        """The shaft centreline plot: each plane's average position (the probes' two-turn means
+        through the baseline's splines, :mod:`rotor_env.measurements.drift`) coloured by speed."""
+        from ..plots.field import plot_centreline
+
+        rig = self.record.rig
+        return plot_centreline(self.record.rpm, probe_drift(self.record).centreline(rig), unit=rig.amp_unit,
+                               speed_unit="rpm", ax=ax)
+
     def save_figures(self, folder, *, overwrite: bool = True):
         if not isinstance(self.diagnosis, OutputErrorDiagnosis):
-            return self.diagnosis.save_figures(folder, overwrite=overwrite)
-        return self.diagnosis.save_figures(folder, overwrite=overwrite, speed_scale=self.w_ref / SPEED_UNITS["rpm"],
-                                           speed_unit="speed [rpm]")
+            written = self.diagnosis.save_figures(folder, overwrite=overwrite)
+        else:
+            written = self.diagnosis.save_figures(folder, overwrite=overwrite,
+                                                  speed_scale=self.w_ref / SPEED_UNITS["rpm"], speed_unit="speed [rpm]")
+        import matplotlib.pyplot as plt
+
+        from ..outputs import atomic_write
+
+        fig = self.plot_centreline()
+        path = atomic_write(Path(folder) / "centreline.png",
+                            lambda p: fig.savefig(p, format="png", dpi=110, bbox_inches="tight"), overwrite=overwrite)
+        plt.close(fig)
+        return [*written, path] if isinstance(written, list) else written
 
     @property
     def named_by_vectors(self) -> list[str]:

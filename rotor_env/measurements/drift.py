@@ -40,7 +40,8 @@ fitted with the model, only what the model does not predict is taken.  The 1X ve
 read the shaft's orders only, are order-tracked from the record less its baseline
 (:func:`remove_drift`).  The movement is said in the record's notes (each probe's
 peak-to-peak of its two-turn means, in the rig's unit, and the spline's spacing), and
-:func:`probe_drift` returns it for a centreline plot.
+:func:`probe_drift` returns it (:meth:`ProbeDrift.centreline`: each plane's mean position, which
+:meth:`~rotor_env.diagnosis.from_rig.RigDiagnosis.plot_centreline` draws).
 
 What it cannot take: a random walk of the electronics with power between the baseline's
 cut-off and the slowest 1X (a 1 um random walk over a 10 s record left 1.07-1.1x the floor on
@@ -84,6 +85,19 @@ class ProbeDrift:
     @property
     def cutoff_hz(self) -> float:
         return 0.5 / self.knot_spacing_s
+
+    def centreline(self, rig) -> dict[str, np.ndarray]:
+        """Each plane's average position ``(N, 2)`` along the model's axes (``u`` at the rig
+        file's 0 deg, ``v`` at 90 deg, in the rig's unit), from its probes' baselines by least
+        squares (:func:`~rotor_env.measurements.probes.plane_displacements`)."""
+        from .probes import plane_displacements
+
+        out = {}
+        for plane in rig.plane_names:
+            members = [p for p in rig.probes if p.plane == plane]
+            X = np.column_stack([self.baseline[p.name] for p in members])
+            out[plane] = plane_displacements(np.array([p.angle for p in members]), X)
+        return out
 
     @property
     def peak_to_peak(self) -> dict[str, float]:

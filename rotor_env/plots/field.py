@@ -39,6 +39,7 @@ __all__ = [
     "phase_deg",
     "plot_bode",
     "plot_campbell",
+    "plot_centreline",
     "plot_orbit",
     "plot_parameter_tracks",
     "plot_polar",
@@ -384,6 +385,58 @@ def plot_orbit(
         a.axhline(0, color="0.85", lw=0.5, zorder=0)
         a.axvline(0, color="0.85", lw=0.5, zorder=0)
         a.legend(fontsize=6, loc="upper center", bbox_to_anchor=(0.5, -0.2))
+    return fig
+
+
+# ------------------------------------------------------------------ centreline
+def plot_centreline(
+    speed: np.ndarray,
+    positions: Mapping[str, np.ndarray],
+    *,
+    unit: str = "um",
+    speed_unit: str = "rpm",
+    labels: tuple[str, str] = ("u (0 deg)", "v (90 deg)"),
+    points: int = 400,
+    ax=None,
+):
+    """The shaft centreline plot: each plane's average position against the speed.
+
+    ``positions``: plane -> ``(N, 2)`` average position (the probes' slowly moving mean, in
+    the plane's axes) at the samples whose shaft speed is ``speed`` (in ``speed_unit``,
+    already converted).  Each plane is a path from its first sample (open circle) to its
+    last (filled), coloured by the speed; the origin is the record's mean position (the
+    probes' gap at rest is not known from a run).  Up to ``points`` samples per path.
+    """
+    import matplotlib.pyplot as plt
+
+    speed = np.asarray(speed, dtype=float)
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(5.2, 4.4))
+    else:
+        fig = ax.figure
+    sc = None
+    markers = ("o", "s", "^", "D")
+    for k, (plane, xy) in enumerate(positions.items()):
+        xy = np.asarray(xy, dtype=float)
+        if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) != len(speed):
+            raise ValueError(f"plane {plane!r}: positions must be ({len(speed)}, 2), got {xy.shape}")
+        step = max(1, len(xy) // points)
+        sel = slice(None, None, step)
+        ax.plot(xy[sel, 0], xy[sel, 1], color="0.7", lw=0.8, zorder=1)
+        sc = ax.scatter(xy[sel, 0], xy[sel, 1], c=speed[sel], s=9, cmap="viridis", zorder=2,
+                        marker=markers[k % len(markers)], label=f"plane {plane}")
+        ax.plot(xy[0, 0], xy[0, 1], markers[k % len(markers)], mfc="none", mec="k", ms=9, zorder=3)
+        ax.plot(xy[-1, 0], xy[-1, 1], markers[k % len(markers)], color="k", ms=6, zorder=3)
+    if sc is not None:
+        fig.colorbar(sc, ax=ax, label=axis_label("speed", speed_unit))
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel(axis_label(labels[0], unit))
+    ax.set_ylabel(axis_label(labels[1], unit))
+    ax.set_title("shaft centreline (open: first sample, filled: last)", fontsize=9)
+    ax.axhline(0, color="0.85", lw=0.5, zorder=0)
+    ax.axvline(0, color="0.85", lw=0.5, zorder=0)
+    if len(positions) > 1:
+        ax.legend(fontsize=7)
     return fig
 
 
