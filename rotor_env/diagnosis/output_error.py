@@ -576,6 +576,30 @@ class ShootingGrid:
         return np.sin(phi), np.cos(phi), np.cos(2 * phi), np.sin(2 * phi)
 
     @cached_property
+    def rows(self):
+        """The samples in a segment as an index: every sample (a slice: views, no copies) or
+        their positions."""
+        return slice(None) if bool(self.inside.all()) else np.flatnonzero(self.inside)
+
+    @cached_property
+    def output_columns(self) -> np.ndarray:
+        """``(samples in a segment, 2, 10)``: the Jacobian columns of the output terms before
+        the calibration (:data:`OUTPUT_TERMS`): static offsets (x, y); a probe track's 1X runout
+        ``R e^{i phi} + R_b e^{-i phi}`` in ``z = th_y + i th_x`` (any 1X pattern on each axis,
+        columns 2, 3, 8, 9); its 2X, any pattern of ``2 phi`` on each axis (4-7)."""
+        s, c, c2, s2 = self.output_basis
+        block = np.zeros((len(s), 2, _CAL))
+        block[:, 0, 0] = 1.0
+        block[:, 1, 1] = 1.0
+        block[:, 0, 2], block[:, 1, 2] = s, c
+        block[:, 0, 3], block[:, 1, 3] = c, -s
+        block[:, 0, 4], block[:, 0, 5] = c2, s2
+        block[:, 1, 6], block[:, 1, 7] = c2, s2
+        block[:, 0, 8], block[:, 1, 8] = -s, c
+        block[:, 0, 9], block[:, 1, 9] = c, s
+        return block
+
+    @cached_property
     def baseline_basis(self):
         """``(B, G)``: the cubic B-splines of the slowly moving mean at the samples in a segment
         (sparse, knots :attr:`baseline_spacing` apart, the last interval stretched to the
@@ -755,51 +779,35 @@ def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, m
     # the kernel leaves the offsets' columns at zero (no state depends on them)
     status = kernel.module.shoot(grid.t, grid.phi, grid.phid, grid.segments, x0, theta, arg, active,
                                  pidx, midx, qidx, qlo, qhi, grid.ip, grid.substeps, pred, jac)
-    inside = grid.inside
+    rows = grid.rows
     # the probes' calibration first (it acts on the rotor's orbit, not on the track's runout):
     # z + eps conj(z) with z = th_y + i th_x, eps = a + i b -- th_y += a th_y + b th_x,
     # th_x += b th_y - a th_x; every column of the orbit's Jacobian the same way
     a, b = float(offset[_CAL]), float(offset[_CAL + 1])
-    xm, ym = pred[inside, 0].copy(), pred[inside, 1].copy()
+    xm, ym = pred[rows, 0].copy(), pred[rows, 1].copy()
     if a or b:
-        jx, jy = jac[inside, 0, :], jac[inside, 1, :]
-        jac[inside, 0, :] = (1.0 - a) * jx + b * jy
-        jac[inside, 1, :] = (1.0 + a) * jy + b * jx
-        pred[inside, 0] = (1.0 - a) * xm + b * ym
-        pred[inside, 1] = (1.0 + a) * ym + b * xm
-    jac[inside, 0, npar + _CAL] = -xm
-    jac[inside, 1, npar + _CAL] = ym
-    jac[inside, 0, npar + _CAL + 1] = ym
-    jac[inside, 1, npar + _CAL + 1] = xm
-    # the other output terms: static offsets (x, y); a probe track's 1X runout
-    # R e^{i phi} + R_b e^{-i phi} in z = th_y + i th_x (any 1X pattern on each axis); its 2X,
-    # any pattern of 2 phi on each axis
-    s, c, c2, s2 = grid.output_basis
-    pred[inside, 0] += (offset[0] + offset[2] * s + offset[3] * c + offset[4] * c2 + offset[5] * s2
-                        - offset[8] * s + offset[9] * c)
-    pred[inside, 1] += (offset[1] + offset[2] * c - offset[3] * s + offset[6] * c2 + offset[7] * s2
-                        + offset[8] * c + offset[9] * s)
-    jac[inside, 0, npar] = 1.0
-    jac[inside, 1, npar + 1] = 1.0
-    jac[inside, 0, npar + 2] = s
-    jac[inside, 1, npar + 2] = c
-    jac[inside, 0, npar + 3] = c
-    jac[inside, 1, npar + 3] = -s
-    jac[inside, 0, npar + 4] = c2
-    jac[inside, 0, npar + 5] = s2
-    jac[inside, 1, npar + 6] = c2
-    jac[inside, 1, npar + 7] = s2
-    jac[inside, 0, npar + 8] = -s
-    jac[inside, 1, npar + 8] = c
-    jac[inside, 0, npar + 9] = c
-    jac[inside, 1, npar + 9] = s
+        jx, jy = jac[rows, 0, :], jac[rows, 1, :]
+        new_x, new_y = (1.0 - a) * jx + b * jy, (1.0 + a) * jy + b * jx
+        jac[rows, 0, :] = new_x
+        jac[rows, 1, :] = new_y
+        pred[rows, 0] = (1.0 - a) * xm + b * ym
+        pred[rows, 1] = (1.0 + a) * ym + b * xm
+    jac[rows, 0, npar + _CAL] = -xm
+    jac[rows, 1, npar + _CAL] = ym
+    jac[rows, 0, npar + _CAL + 1] = ym
+    jac[rows, 1, npar + _CAL + 1] = xm
+    # the other output terms (static offsets, the track's 1X and 2X runout): columns the same
+    # at every shot (:attr:`ShootingGrid.output_columns`)
+    block = grid.output_columns
+    pred[rows] += block @ offset[:_CAL]
+    jac[rows, :, npar:npar + _CAL] = block
     if grid.baseline_spacing is not None and status == 0:
         # the probes' slowly moving mean (the shaft's centreline, thermal drift), projected
         # out: the prediction takes the least-squares baseline of what it leaves, so the
         # residual is orthogonal to the baseline's splines (variable projection).  The
         # Jacobian stays the model's: with a projected residual its product J'r is the exact
         # gradient; the covariance projects it (:func:`_project`)
-        pred[inside] += _baseline_fit(grid, grid.y[inside] - pred[inside])
+        pred[rows] += _baseline_fit(grid, grid.y[rows] - pred[rows])
     return status, pred, jac
 
 
