@@ -63,7 +63,12 @@ from ..results import Result
 from .from_vectors import VectorDiagnosis, diagnose_vectors
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES
 from .oe_diagnosis import OutputErrorDiagnosis, diagnose_output_error
-from .output_error import TIME_UNIT_EFFECT, ShootingGrid, noise_ar1_two_channels
+from .output_error import (
+    TIME_UNIT_EFFECT,
+    ShootingGrid,
+    noise_ar1_two_channels,
+    noise_std_high_band,
+)
 from .synchronous import RUNOUT, SECOND_MODE, extra_mode_vectors
 from .synchronous.fit import VectorFit, fit_vectors
 
@@ -419,8 +424,6 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
     # that a model's own slow response (a cracked shaft's mean deflection under its load
     # changes with the speed) is fitted, not taken out of the data alone
     drift = probe_drift(record)
-    if drift.knot_spacing_s > 0:
-        record = replace(record, notes=(*record.notes, drift_note(drift, record.rig.amp_unit)))
     vd = diagnose_vectors(remove_drift(record, drift).vectors((1,)), ip=ip, alpha=alpha)
     if RUNOUT in vd.missing and record.rig.slow_roll_rpm is None:
         # runout seen in the 1X vectors: the waveforms' output-error fit carries a probe
@@ -440,6 +443,9 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
             f"time scale from the starting 1X model ({vd.before.w_ref / SPEED_UNITS['rpm']:.0f} rpm): the final "
             f"1X model's natural frequency {w_ref / SPEED_UNITS['rpm']:.0f} rpm is far from it")))
         w_ref = vd.before.w_ref
+    if drift.knot_spacing_s > 0:
+        record = replace(record, notes=(*record.notes, drift_note(drift, record.rig.amp_unit,
+                                                                  drift.relevant(probe_noise(record, w_ref)))))
     step("waveforms: the output-error fit of every candidate")
     if not math.isfinite(w_ref):  # pragma: no cover - fit_vectors returns finite values
         raise RuntimeError("no natural frequency identified")
@@ -608,6 +614,14 @@ def one_mode_band(fit: VectorFit) -> tuple[float, float] | None:
     return lo, hi
 
 
+def probe_noise(record: RigRecord, w_ref: float) -> dict[str, float]:
+    """Each probe's noise per sample (the rig's unit), white, from the band above the response
+    (the orders up to 3 of the top speed and the natural frequency ``w_ref``, rad/s)."""
+    dt = float(np.median(np.diff(record.t)))
+    f_top = 4.0 * max(float(np.max(record.speed)), w_ref) / (2 * math.pi)
+    return {nm: noise_std_high_band(x, dt, f_top) for nm, x in record.readings.items()}
+
+
 def waveform_grid(record: RigRecord, w_ref: float) -> tuple[ShootingGrid, float]:
     """The record on the output-error grid (dimensionless: ``t' = t w_ref``, displacements in
     :data:`LENGTH_UNIT` or rad) with the probes' noise read off the band above the response."""
@@ -627,8 +641,10 @@ def waveform_grid(record: RigRecord, w_ref: float) -> tuple[ShootingGrid, float]
     t = (record.t[keep] - record.t[keep][0]) * w_ref
     phi, speed = smooth_spin(record.t[keep], ph[keep])
     # the probes' slowly moving mean (the shaft's centreline on its bearings, thermal drift)
-    # fitted with every model: splines a few revolutions of the slowest speed apart
-    spacing = drift_knot_spacing(record.t[keep], record.speed[keep]) * w_ref
+    # fitted with every model where it is there: splines a few revolutions of the slowest
+    # speed apart
+    fitted = probe_drift(record).relevant(probe_noise(record, w_ref))
+    spacing = drift_knot_spacing(record.t[keep], record.speed[keep]) * w_ref if fitted else 0.0
     grid = ShootingGrid.from_arrays(t, phi, speed / w_ref, record.v[keep] / scale,
                                     record.u[keep] / scale, record.rig.ip, noise_std=max(sigma / scale, 1e-15),
                                     noise_rho=rho, baseline_spacing=spacing if spacing > 0 else None)

@@ -43,6 +43,10 @@ peak-to-peak of its two-turn means, in the rig's unit, and the spline's spacing)
 :func:`probe_drift` returns it (:meth:`ProbeDrift.centreline`: each plane's mean position, which
 :meth:`~rotor_env.diagnosis.from_rig.RigDiagnosis.plot_centreline` draws).
 
+It is fitted where some probe's baseline is more than :data:`DRIFT_RELEVANT` of its noise
+(RMS): a smaller one adds under 1 % to the residual's variance, and the baseline costs the fit
+steps (its curvature is the model's, ``J'J``, larger than the projected residual's).
+
 What it cannot take: a random walk of the electronics with power between the baseline's
 cut-off and the slowest 1X (a 1 um random walk over a 10 s record left 1.07-1.1x the floor on
 healthy records and 1.7x on a tilt rig, whose probes' difference doubles it): noise in the
@@ -56,7 +60,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["DRIFT_REVOLUTIONS", "MEAN_REVOLUTIONS", "ProbeDrift", "drift_knot_spacing", "drift_note", "probe_drift",
+__all__ = ["DRIFT_RELEVANT", "DRIFT_REVOLUTIONS", "MEAN_REVOLUTIONS", "ProbeDrift", "drift_knot_spacing", "drift_note", "probe_drift",
            "remove_drift", "turn_means"]
 
 #: knot spacing of the baseline spline, in revolutions at the record's slowest speed
@@ -66,6 +70,11 @@ MEAN_REVOLUTIONS = 2
 #: the record's slowest speed: this quantile of its speed (a few revolutions at standstill
 #: before a run-up do not make the whole baseline a constant)
 SLOWEST_QUANTILE = 0.02
+#: the baseline is fitted where some probe's moves by more than this share of its noise (RMS
+#: of the spline against the probe's noise per sample): below, it adds under 1 % to the
+#: residual's variance, and the fit is left as it was (the baseline slows the fit's
+#: convergence: 9 steps for 4 on a crack's final model)
+DRIFT_RELEVANT = 0.1
 #: fewest samples per knot interval (a short record at a low sample rate: fewer knots)
 MIN_SAMPLES_PER_KNOT = 32
 
@@ -98,6 +107,16 @@ class ProbeDrift:
             X = np.column_stack([self.baseline[p.name] for p in members])
             out[plane] = plane_displacements(np.array([p.angle for p in members]), X)
         return out
+
+    @property
+    def rms(self) -> dict[str, float]:
+        """Each probe's baseline's root mean square (its mean is zero)."""
+        return {nm: float(np.sqrt(np.mean(b * b))) if len(b) else 0.0 for nm, b in self.baseline.items()}
+
+    def relevant(self, noise: dict[str, float]) -> bool:
+        """Whether some probe's baseline is more than :data:`DRIFT_RELEVANT` of its noise
+        ``noise[probe]`` (per sample, same unit)."""
+        return self.knot_spacing_s > 0 and any(r > DRIFT_RELEVANT * noise[nm] for nm, r in self.rms.items())
 
     @property
     def peak_to_peak(self) -> dict[str, float]:
@@ -184,10 +203,11 @@ def remove_drift(record, drift: ProbeDrift | None = None):
     return replace(record, readings=readings, u=u, v=v)
 
 
-def drift_note(drift: ProbeDrift, unit: str) -> str:
+def drift_note(drift: ProbeDrift, unit: str, fitted: bool) -> str:
     """What the record's slowly moving mean was and how the diagnosis took it."""
     ptp = ", ".join(f"{nm} {p:.3g}" for nm, p in drift.peak_to_peak.items())
+    how = (f"fitted with every model: splines {drift.knot_spacing_s:.3g} s apart ({DRIFT_REVOLUTIONS:g} turns at the "
+           f"slowest speed, {drift.slowest_rpm:.0f} rpm; half gain at {drift.cutoff_hz:.3g} Hz)" if fitted else
+           f"not fitted: under {DRIFT_RELEVANT:g} of the probes' noise (RMS)")
     return (f"the probes' slowly moving mean (the shaft's centreline on its bearings, thermal growth, a drifting "
-            f"gap) fitted with every model: splines {drift.knot_spacing_s:.3g} s apart ({DRIFT_REVOLUTIONS:g} turns "
-            f"at the slowest speed, {drift.slowest_rpm:.0f} rpm; half gain at {drift.cutoff_hz:.3g} Hz); its mean over "
-            f"two turns moved by {ptp} {unit} peak to peak")
+            f"gap) {how}; its mean over two turns moved by {ptp} {unit} peak to peak")
