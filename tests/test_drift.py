@@ -72,6 +72,18 @@ def test_a_slow_drift_under_a_large_1x_is_recovered(seed):
     assert np.sqrt(np.mean(quiet.baseline["x"] ** 2)) < 0.01
 
 
+def test_a_baseline_is_relevant_above_a_tenth_of_the_noise():
+    from rotor_env.measurements.drift import DRIFT_RELEVANT, ProbeDrift
+
+    t = np.linspace(0.0, 1.0, 1001)
+    ramp = np.sqrt(3.0) * (2.0 * t - 1.0)  # unit RMS
+    drift = ProbeDrift(t=t, baseline={"x": 0.05 * ramp, "y": 0.3 * ramp}, knot_spacing_s=0.1, slowest_rpm=600.0)
+    assert drift.rms["y"] == pytest.approx(0.3, rel=1e-2)
+    assert drift.relevant({"x": 1.0, "y": 0.3 / DRIFT_RELEVANT * 0.9})
+    assert not drift.relevant({"x": 1.0, "y": 0.3 / DRIFT_RELEVANT * 1.1})
+    assert not ProbeDrift(t=t, baseline={"x": ramp}, knot_spacing_s=0.0, slowest_rpm=0.0).relevant({"x": 0.01})
+
+
 def test_the_knot_spacing_is_bounded_by_the_samples_and_the_record():
     t = np.arange(0.0, 2.0, 1e-3)
     assert drift_knot_spacing(t, np.full(len(t), 2 * math.pi * 100.0)) == pytest.approx(0.04)
@@ -143,6 +155,12 @@ def test_a_healthy_rig_whose_centreline_moves_is_explained(one_plane, tmp_path, 
     assert (tmp_path / "figs" / "centreline.png") in written
     xy = probe_drift(result.record).centreline(one_plane)["A"]
     assert 5.8 - 3.0 < float(np.max(np.hypot(*(xy - xy[0]).T))) < 5.8 + 3.0
+    # the same rotor without drift: the baseline is not fitted (under a tenth of the noise)
+    still = simulate_rig(one_plane, p, natural_rpm=1800.0, rpm_from=600.0, rpm_to=3000.0, rpm_per_s=300.0,
+                         sample_rate=2500.0, noise=0.5, seed=3)
+    quiet = _diagnose(one_plane, still, tmp_path).to_dict()
+    assert quiet["verdict"] == "explained" and not quiet["missing"]
+    assert any("slowly moving mean" in n and "not fitted" in n for n in quiet["notes"])
     # the control: no baseline
     monkeypatch.setattr(from_rig, "drift_knot_spacing", lambda t, speed: 0.0)
     bare = _diagnose(one_plane, run, tmp_path).to_dict()

@@ -1,5 +1,10 @@
 """Diagnosis of a rig recording (probes and keyphasor in engineering units).
 
+0. What the instruments add is taken out (:mod:`~rotor_env.measurements.artefacts`: lines at a
+   fixed frequency, runout above 2X), and the probes' slowly moving mean (the shaft's
+   centreline on its bearings, thermal drift; :mod:`~rotor_env.measurements.drift`) is
+   measured: the 1X vectors are tracked without it, the waveforms' fit carries it with every
+   model where it is more than a tenth of the probes' noise.
 1. The probes are order-tracked per revolution and the 1X vectors diagnosed
    (:mod:`.from_vectors`): critical speeds in rpm, damping ratios, the natural frequency
    ``w_ref`` — and probe runout, which the waveforms' fit then carries as a 1X pattern

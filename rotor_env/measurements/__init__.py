@@ -14,6 +14,8 @@
 - :mod:`.waveforms` — a rig's raw waveforms (keyphasor and probes) to measurements.
 - :mod:`.artefacts` — what the instruments add and no rotor model holds: lines at fixed
   frequencies (mains hum) and the probe track's runout above 2X, found and taken out.
+- :mod:`.drift` — the probes' slowly moving mean (the shaft's centreline on its bearings,
+  thermal drift): its two-turn means, the spline through them, each plane's centreline.
 
 Every reader of data lives here; what simulates a rig recording (the simulator's output
 written as a rig would record it) is :mod:`rotor_env.rig_simulation`, beside the simulator.
