@@ -237,7 +237,7 @@ class RigDiagnosis(Result):
         path = atomic_write(Path(folder) / "centreline.png",
                             lambda p: fig.savefig(p, format="png", dpi=110, bbox_inches="tight"), overwrite=overwrite)
         plt.close(fig)
-        return [*written, path] if isinstance(written, list) else written
+        return [*written, path]
 
     @property
     def named_by_vectors(self) -> list[str]:

@@ -609,11 +609,10 @@ class ShootingGrid:
         from scipy.interpolate import BSpline
         from scipy.linalg import cho_factor
 
+        from ..measurements.drift import spline_knots
+
         t = self.t[self.inside]
-        t0, t1 = float(t[0]), float(t[-1])
-        n_int = max(1, int(math.floor((t1 - t0) / self.baseline_spacing)))
-        knots = np.concatenate([[t0] * 3, np.linspace(t0, t1, n_int + 1), [t1] * 3])
-        B = BSpline.design_matrix(t, knots, 3).tocsr()
+        B = BSpline.design_matrix(t, spline_knots(float(t[0]), float(t[-1]), self.baseline_spacing), 3).tocsr()
         G = (B.T @ B).toarray()
         return B, cho_factor(G + 1e-12 * np.trace(G) / len(G) * np.eye(len(G)))
 

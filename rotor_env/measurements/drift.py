@@ -1,4 +1,4 @@
-"""The probes' slowly moving mean, found and taken out before the diagnosis.
+"""The probes' slowly moving mean, measured and fitted with every model.
 
 A proximity probe reads the gap to the shaft, and the gap's mean does not stay put while
 the rotor runs:
@@ -24,7 +24,7 @@ spline with knots :data:`DRIFT_REVOLUTIONS` revolutions of the slowest speed apa
 whole record at most) smooths what the short means leave of the noise and of the
 non-integer orders (a free whirl at the natural frequency, attenuated by the turn-mean's
 ``sinc`` and again by the spline): it passes a slow variation whole, half of one at
-``1 / (2 h)`` (a quarter of the slowest 1X), and nearly nothing above ``1 / h``.  A spline
+``1 / (2 h)`` (an eighth of the slowest 1X), and nearly nothing above ``1 / h``.  A spline
 fitted to the readings themselves would not do: its end pieces take a large share of a
 partial turn of a 100 um 1X (tens of um).  The baseline's own mean is left in the
 readings: the constant gap is the probes' business
@@ -60,8 +60,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["DRIFT_RELEVANT", "DRIFT_REVOLUTIONS", "MEAN_REVOLUTIONS", "ProbeDrift", "drift_knot_spacing", "drift_note", "probe_drift",
-           "remove_drift", "turn_means"]
+__all__ = ["DRIFT_RELEVANT", "DRIFT_REVOLUTIONS", "MEAN_REVOLUTIONS", "ProbeDrift", "drift_knot_spacing",
+           "drift_note", "probe_drift", "remove_drift", "spline_knots", "turn_means"]
 
 #: knot spacing of the baseline spline, in revolutions at the record's slowest speed
 DRIFT_REVOLUTIONS = 4.0
@@ -124,9 +124,10 @@ class ProbeDrift:
         return {nm: float(np.ptp(b)) if len(b) else 0.0 for nm, b in self.baseline.items()}
 
 
-def _knots(t0: float, t1: float, h: float) -> np.ndarray:
-    """Knot vector of a cubic spline on ``[t0, t1]``: interior knots ``h`` apart (the last
-    interval stretched to end at ``t1``), the ends repeated four times."""
+def spline_knots(t0: float, t1: float, h: float) -> np.ndarray:
+    """Knot vector of a cubic spline on ``[t0, t1]``: interior knots about ``h`` apart (the
+    whole intervals of ``h`` in the span, stretched to end at ``t1``), the ends repeated four
+    times."""
     n_int = max(1, int(math.floor((t1 - t0) / h)))
     inner = np.linspace(t0, t1, n_int + 1)
     return np.concatenate([[t0] * 3, inner, [t1] * 3])
@@ -148,6 +149,11 @@ def turn_means(phi: np.ndarray, x: np.ndarray, turns: int = MEAN_REVOLUTIONS) ->
     return (hi - lo) / span
 
 
+def _slowest_rev_hz(speed: np.ndarray) -> float:
+    """The record's slowest speed (rev/s) from its speeds (rad/s): :data:`SLOWEST_QUANTILE`."""
+    return float(np.quantile(np.abs(np.asarray(speed, float)), SLOWEST_QUANTILE)) / (2.0 * math.pi)
+
+
 def drift_knot_spacing(t: np.ndarray, speed: np.ndarray) -> float:
     """The baseline's knot spacing (s) for a record of times ``t`` (s) and shaft speeds
     ``speed`` (rad/s): :data:`DRIFT_REVOLUTIONS` revolutions of its slowest speed, at least
@@ -157,8 +163,7 @@ def drift_knot_spacing(t: np.ndarray, speed: np.ndarray) -> float:
     duration = float(t[-1] - t[0]) if len(t) > 1 else 0.0
     if duration <= 0:
         return 0.0
-    rev_hz = np.abs(np.asarray(speed, float)) / (2.0 * math.pi)
-    slowest = float(np.quantile(rev_hz, SLOWEST_QUANTILE))
+    slowest = _slowest_rev_hz(speed)
     h = DRIFT_REVOLUTIONS / slowest if slowest > 0 else math.inf
     return min(max(h, MIN_SAMPLES_PER_KNOT * duration / (len(t) - 1)), duration)
 
@@ -174,11 +179,11 @@ def probe_drift(record) -> ProbeDrift:
     t = np.asarray(record.t, float)
     phi = np.asarray(record.phi, float)
     h = drift_knot_spacing(t, record.speed)
-    slowest = float(np.quantile(np.abs(np.asarray(record.speed, float)), SLOWEST_QUANTILE)) / (2.0 * math.pi)
+    slowest = _slowest_rev_hz(record.speed)
     baseline = {nm: np.zeros(len(t)) for nm in record.readings}
     advancing = len(phi) > 1 and bool(np.all(np.diff(phi) > 0))
     if h > 0 and advancing:
-        knots = _knots(float(t[0]), float(t[-1]), h)
+        knots = spline_knots(float(t[0]), float(t[-1]), h)
         for nm, x in record.readings.items():
             x = np.asarray(x, float)
             means = turn_means(phi, x - float(np.mean(x)))
