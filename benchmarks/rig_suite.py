@@ -34,6 +34,7 @@ against probe noise, the per-fault table, every failure, the time per record.
     python benchmarks/rig_suite.py --noise 0.3 --faults asymmetry,rub --reps 3
     python benchmarks/rig_suite.py --noise 0.5 --artefacts    # with mains hum and a scratch on every track
     python benchmarks/rig_suite.py --noise 0.5 --drift 20     # the probes' mean moving by 20 um (centreline, thermal)
+    python benchmarks/rig_suite.py --noise 0.5 --flicker 100  # 1/f probe noise with its corner at 100 Hz
     python benchmarks/rig_suite.py --report seed1.json seed2.json   # the tables of saved runs together
 """
 
@@ -104,6 +105,9 @@ class RecordSpec:
     #: the probes' slowly moving mean (``--drift``, um): each plane's centreline lifting with
     #: the speed squared by this much, each probe's gap drifting linearly by up to half of it
     drift_um: float = 0.0
+    #: the probes' 1/f noise corner (``--flicker``, Hz): their noise density the white
+    #: noise's times ``1 + corner / f``
+    flicker_hz: float = 0.0
 
 
 def build_specs(noises=NOISES_UM, kinds=KINDS, reps: int = 1, seed: int = 0, quick: bool = False) -> list[RecordSpec]:
@@ -257,6 +261,8 @@ def make_record(spec: RecordSpec, folder: Path) -> tuple[Path, Path, dict]:
                "scratch": float(rng.uniform(1.0, 4.0))}
     if spec.drift_um:
         art["drift"] = spec.drift_um
+    if spec.flicker_hz:
+        art["flicker_hz"] = spec.flicker_hz
     run = simulate_rig(rig, _params(healthy, extra, rig.ip), **run_kw, noise=spec.noise_um, runout=runout,
                        runout_phase_deg=runout_deg, seed=spec.seed, **art)
     faulty_peak = _orbit_peak(simulate_rig(rig, _params(healthy, extra, rig.ip), **run_kw, noise=0.0), rig) \
@@ -414,13 +420,14 @@ def detection_table(outcomes: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def _row_key(o: dict) -> tuple[float, bool, float]:
-    return o["spec"]["noise_um"], bool(o["spec"].get("artefacts")), float(o["spec"].get("drift_um") or 0.0)
+def _row_key(o: dict) -> tuple[float, bool, float, float]:
+    return (o["spec"]["noise_um"], bool(o["spec"].get("artefacts")), float(o["spec"].get("drift_um") or 0.0),
+            float(o["spec"].get("flicker_hz") or 0.0))
 
 
-def _row_label(key: tuple[float, bool, float]) -> str:
+def _row_label(key: tuple[float, bool, float, float]) -> str:
     return (f"{key[0]:g}" + (" + hum, scratch" if key[1] else "")
-            + (f" + {key[2]:g} drift" if key[2] else ""))
+            + (f" + {key[2]:g} drift" if key[2] else "") + (f" + 1/f below {key[3]:g} Hz" if key[3] else ""))
 
 
 def per_fault_table(outcomes: list[dict]) -> str:
@@ -505,6 +512,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--drift", type=float, default=0.0, metavar="UM",
                     help="the probes' slowly moving mean on every record: each plane's centreline lifting by UM with "
                          "the speed squared, each probe's gap drifting linearly by up to UM/2")
+    ap.add_argument("--flicker", type=float, default=0.0, metavar="HZ",
+                    help="the probes' 1/f noise on every record: its density the white noise's times 1 + HZ / f")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2, help="worker processes (one BLAS thread each)")
     ap.add_argument("--out", default="rig_suite.json", help="JSON of every outcome (rewritten after each record)")
@@ -553,6 +562,12 @@ def main(argv: list[str] | None = None) -> int:
         if not (math.isfinite(args.drift) and args.drift > 0):
             ap.error(f"--drift: a positive number of um, got {args.drift}")
         specs = [replace(s, drift_um=args.drift) for s in specs]
+    if args.flicker:
+        from dataclasses import replace
+
+        if not (math.isfinite(args.flicker) and args.flicker > 0):
+            ap.error(f"--flicker: a positive corner frequency in Hz, got {args.flicker}")
+        specs = [replace(s, flicker_hz=args.flicker) for s in specs]
     if args.medium:
         # a subset of the full plan (same indices and seeds): what a loaded 2-core machine
         # diagnoses in about half an hour

@@ -77,6 +77,7 @@ def simulate_rig(
     sensitivity: Mapping[str, float] | None = None,
     angle_error_deg: Mapping[str, float] | None = None,
     drift: float = 0.0,
+    flicker_hz: float = 0.0,
     seed: int | None = None,
 ) -> RigRun:
     """Simulate a start-up (``rpm_per_s > 0``) or coast-down (``< 0``) as the rig records it.
@@ -102,6 +103,10 @@ def simulate_rig(
     in a direction of its own, as the square of the speed over the top speed (a shaft lifting
     on fluid-film bearings), and each probe's gap drifts linearly over the record by up to
     half of it (thermal growth).
+    ``flicker_hz``: the probes' 1/f (flicker) noise corner: each probe's noise density is the
+    white ``noise``'s times ``1 + flicker_hz / f`` (from the record's lowest frequency up; a
+    driver's electronics, a cable's triboelectric noise) -- noise in the rotor's band that the
+    band above it does not show (:func:`rotor_env.diagnosis.orders.off_order_noise` reads it).
     """
     def per_plane(v, plane) -> float:
         return float(v.get(plane, 0.0)) if isinstance(v, Mapping) else float(v)
@@ -167,6 +172,10 @@ def simulate_rig(
     lift_dir = {pl: float(rng_art.uniform(0, 2 * math.pi)) for pl in rig.plane_names}
     thermal = {p.name: float(rng_art.uniform(-0.5, 0.5)) for p in rig.probes}
     ramp = (t - t[0]) / max(float(t[-1] - t[0]), 1e-300)
+    if not (math.isfinite(flicker_hz) and flicker_hz >= 0):
+        raise ValueError(f"flicker_hz must be a number >= 0, got {flicker_hz!r}")
+    flicker = {p.name: _flicker(len(t), sample_rate, flicker_hz, rng_art) * noise * _unit_um(rig)
+               for p in rig.probes} if flicker_hz > 0 and noise > 0 else {}
     scratch_passed = [(order, c, order * rev_hz < 0.4 * sample_rate)
                       for order, c in enumerate(SCRATCH_ORDERS[1:], start=1)] if scratch else []
     for p in rig.probes:
@@ -178,6 +187,8 @@ def simulate_rig(
         # the probe sees the track's runout at its own angle: phi - angle
         reading_um = metres / 1e-6 + np.real(r * np.exp(1j * (phi - p.angle))) * _unit_um(rig)
         reading_um = reading_um + rng.normal(0.0, noise * _unit_um(rig), len(t)) if noise > 0 else reading_um
+        if flicker:
+            reading_um = reading_um + flicker[p.name]
         if drift:
             reading_um = reading_um + drift * _unit_um(rig) * (
                 lift * math.cos(p.angle - lift_dir[p.plane]) + thermal[p.name] * (2.0 * ramp - 1.0))
@@ -195,6 +206,18 @@ def simulate_rig(
             cols[p.name] = reading_um * 1e-6 / _metres(rig)
     cols["_phi"] = phi
     return RigRun(cols, natural_rpm, params)
+
+
+def _flicker(n: int, sample_rate: float, corner_hz: float, rng: np.random.Generator) -> np.ndarray:
+    """Unit white noise's 1/f companion: Gaussian noise whose one-sided density is a unit white
+    noise's (``2 / sample_rate``) times ``corner_hz / f``, shaped in the frequency domain (the
+    record's zero frequency left out)."""
+    spec = rng.normal(size=n // 2 + 1) + 1j * rng.normal(size=n // 2 + 1)
+    f = np.fft.rfftfreq(n, 1.0 / sample_rate)
+    gain = np.zeros_like(f)
+    gain[1:] = np.sqrt(corner_hz / f[1:])
+    # irfft of unit complex Gaussian bins has variance 2 / n per bin pair: scaled to unit white
+    return np.fft.irfft(spec * gain, n) * math.sqrt(n / 2.0)
 
 
 def _scratch_orders(width: float = 1.0 / 12.0, orders: int = 96) -> np.ndarray:

@@ -50,6 +50,7 @@ from ..effects import EFFECTS, DerivedNames, crack_effects
 from ..results import Result
 from .change import ParameterChange, parameter_constancy
 from .detectability import Detectability, assess_all
+from .orders import OffOrderNoise, off_order_noise
 from .output_error import (
     TIME_UNIT_EFFECT,
     OutputErrorFit,
@@ -469,6 +470,41 @@ def _crack_laws_from_lead(grid, screen_grid, screen_x0, model, lib, fits, keep, 
         if full is not None and (c not in keep or full.rss < fits[c].rss):
             out[c] = full
     return out
+
+
+def in_band_noise(fit: OutputErrorFit) -> OffOrderNoise:
+    """The probes' noise in the rotor's band, read off ``fit``'s residual away from the shaft's
+    orders and the free whirl (:func:`.orders.off_order_noise`), against the grid's noise
+    model (read above the response).  The free whirl at a speed ``W``: ``(+-ip W + sqrt(ip^2
+    W^2 + 4 k)) / 2`` with the fitted stiffness ``k`` (the gyroscopic pair; ``sqrt(k)``
+    without it)."""
+    g = fit.grid
+    k_name = f"{TIME_UNIT_EFFECT}.k"
+    k = fit.value(k_name) if k_name in fit.names else 1.0
+    k = k if math.isfinite(k) and k > 0 else 1.0
+    ip = float(g.ip)
+
+    def whirl(w: float) -> list[float]:
+        root = math.sqrt(ip * ip * w * w + 4.0 * k)
+        return [0.5 * (root + ip * w), 0.5 * (root - ip * w)]
+
+    rows = g.inside
+    above = 4.0 * max(float(np.max(np.abs(g.phid))), math.sqrt(k)) / (2.0 * math.pi)
+    return off_order_noise(g.t[rows], fit.residual[rows], g.phid[rows], whirl, g.noise_density, above=above)
+
+
+def _coloured_note(noise: OffOrderNoise, fit: OutputErrorFit) -> str:
+    """What the in-band noise did to the floor, the bands named in the natural frequency."""
+    k_name = f"{TIME_UNIT_EFFECT}.k"
+    wn = math.sqrt(max(fit.value(k_name), 1e-12)) if k_name in fit.names else 1.0
+    per = 2.0 * math.pi / wn  # a band in cycles per unit time, over the natural frequency
+    bands = ", ".join(f"{r:.3g}x at {lo * per:.2g}-{hi * per:.2g}"
+                      for (lo, hi), r, up in zip(noise.bands, noise.ratio, noise.raised, strict=True) if up)
+    return (f"the probes' noise is coloured in the rotor's band (log10 p = {noise.log10_p:.3g} that it is at the level "
+            f"read above the response): away from the shaft's orders and the free whirl the residual's density is "
+            f"{bands or 'within two standard errors in each band, above it together'} times that level (bands in "
+            f"multiples of the natural frequency); the floor counts it: {math.sqrt(noise.variance_factor):.4g}x the "
+            "level read above the response")
 
 
 def _half_turn_orientation(effect: str):
@@ -951,6 +987,16 @@ def diagnose_output_error(
         # hold only near an optimum (a record at one speed, 1200-1210 rpm, crawls along a
         # valley of stiffness, damping and unbalance: 1X at one speed holds two numbers)
         current = _run_on(current, floor, notes)
+    # the probes' noise in the rotor's band, read off the final model's residual between the
+    # shaft's orders: 1/f noise lifts it above the level read above the response.  Read after
+    # the search, not before it: a model that lacks a hinge crack leaves its harmonics in that
+    # band at low speed, which would raise the floor the search decides against
+    in_band = in_band_noise(current)
+    if in_band.variance_factor > 1.0:
+        notes.append(_coloured_note(in_band, current))
+        floor *= math.sqrt(in_band.variance_factor)
+        say(f"the probes' noise is coloured in the rotor's band: the floor {math.sqrt(in_band.variance_factor):.4g}x "
+            "the level above the response")
     # one model for the whole record: is it the same rotor all through? (a crack that opens
     # above the critical barely lifts the residual, but the fit's scores drift at its onset)
     change = _constancy(current, floor, alpha)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -71,3 +72,190 @@ def failing_windows(t: np.ndarray, r: np.ndarray, width: float = 2.0, factor: fl
 
 def first_rows(values: np.ndarray, equation: str) -> np.ndarray:
     return values[0::2] if equation == "both" else values
+
+
+# ------------------------------------------------------------------ the noise in the rotor's band
+#: the orders of the shaft a model's misfit carries (a crack's 2X and 3X, a misalignment's 2X,
+#: a rub's half and third orders, a hinge's or an impact's harmonics): periodogram bins near
+#: them are not noise (higher harmonics are weak; the bands' medians ignore them)
+MISFIT_ORDERS = (1 / 3, 1 / 2, 2 / 3, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)
+#: half-width of the band around each free whirl frequency left out (a share of it: a rub's
+#: contact, the supports' anisotropy or the gyroscopic split move it)
+WHIRL_WIDTH = 0.25
+#: bins left out either side of an order or a whirl band: the Blackman-Harris window's main
+#: lobe is four bins wide each way (and a bin's offset) and its side lobes 92 dB down, so a misfit line a hundred
+#: times the noise leaks nothing into the bins read (a Hann window's leaked, and a cracked
+#: record's missing crack raised its floor by 3 %)
+LEAK_BINS = 4
+#: periodogram bins a band needs to be read
+MIN_BAND_BINS = 32
+#: the joint test that the bands read are at the model's level (white above the response):
+#: coloured where its p-value is below this (a white record is read as coloured once in a
+#: thousand; where it is, the bands' own levels count, which scatter about one)
+COLOURED_P = 1e-3
+
+
+@dataclass(frozen=True)
+class OffOrderNoise:
+    """The residual's level away from the shaft's orders and the free whirl, band by band,
+    against a noise model (:func:`off_order_noise`).
+
+    ``bands``: ``(lo, hi)`` of each octave (cycles per unit of time); ``ratio``: its level over
+    the model's, relative to the band above the response (``nan`` where fewer than
+    :data:`MIN_BAND_BINS` bins were read); ``se``: its standard error; ``weight``: each band's
+    share of the model's noise power; ``bins``: periodogram bins read in it."""
+
+    bands: tuple[tuple[float, float], ...]
+    ratio: np.ndarray
+    se: np.ndarray
+    weight: np.ndarray
+    bins: np.ndarray
+
+    @property
+    def read(self) -> np.ndarray:
+        return np.isfinite(self.ratio)
+
+    @property
+    def log10_p(self) -> float:
+        """log10 of the p-value of "every band read is at the model's level": the sum of the
+        squared standardised deviations, chi-square with a degree of freedom a band."""
+        from scipy.stats import chi2
+
+        z = (self.ratio[self.read] - 1.0) / self.se[self.read]
+        if not z.size:
+            return 0.0
+        return float(chi2.logsf(float(np.sum(z * z)), z.size) / math.log(10.0))
+
+    @property
+    def coloured(self) -> bool:
+        """Whether the bands read are not at the model's level (:data:`COLOURED_P`)."""
+        return self.log10_p < math.log10(COLOURED_P)
+
+    @property
+    def raised(self) -> np.ndarray:
+        """The bands read that stand more than two standard errors above the model's level."""
+        return self.read & (np.nan_to_num(self.ratio - 2.0 * self.se, nan=0.0) > 1.0)
+
+    @property
+    def level(self) -> np.ndarray:
+        """Each band's noise level over the model's as the floor counts it: where the bands are
+        :attr:`coloured`, a band read at its own, one too narrow to read (the free whirl's, a
+        band crowded with orders) between two read ones at their geometric mean, else at the
+        model's (1); where they are not, every band at the model's."""
+        if not self.coloured:
+            return np.ones(len(self.bands))
+        used = np.where(self.read, self.ratio, 1.0)
+        for b in np.flatnonzero(~self.read):
+            below = np.flatnonzero(self.read[:b])
+            above = np.flatnonzero(self.read[b + 1:])
+            used[b] = (math.sqrt(used[below[-1]] * used[b + 1 + above[0]])
+                       if below.size and above.size else 1.0)
+        return used
+
+    @property
+    def variance_factor(self) -> float:
+        """The noise's variance over the model's (at least one): each band at :attr:`level`,
+        what no band covers (below the lowest, above the response) at the model's."""
+        return float(max(1.0, 1.0 + np.sum(self.weight * (self.level - 1.0))))
+
+
+def off_order_noise(t: np.ndarray, residual: np.ndarray, speed: np.ndarray, whirl, density, *,
+                    above: float, orders: tuple[float, ...] = MISFIT_ORDERS) -> OffOrderNoise:
+    """The residual's noise level in the rotor's band, read where no model's misfit can be.
+
+    A model's misfit is locked to the shaft -- at its orders (:data:`MISFIT_ORDERS`) -- or
+    rings at a free whirl frequency; the probes' noise is neither.  So the residual's
+    short-time periodogram (Hann windows, half overlapping) is read only at bins clear of
+    every order ``o f_1X`` (by the window's sweep ``o df_1X / 2`` and three bins) and of each
+    free whirl frequency (by :data:`WHIRL_WIDTH` of it).  Each bin is divided by the noise
+    model's density there (``density(nu)``, one-sided, integrating to the model's variance),
+    and each octave's level is the median of those ratios over ``ln 2`` (a periodogram bin is
+    the density times an exponential variable of mean one: the median ignores a few lines and
+    a neighbouring mode's free ring), relative to the same read above ``above`` (cycles per
+    unit time: above the response, where the model's level was read).  Its standard error is
+    that of an exponential sample's median, ``1.44 / sqrt(n)``, with the bins counted a third
+    (a Hann window's neighbours and the overlap are correlated).
+
+    The window is as long as the 1X frequency takes to sweep one of its bins (``T = 1 /
+    sqrt(|d f_1X / dt|)``) and 2, 4 ... 32 times that: a long window resolves the band below
+    the slowest orders (where the sweep does not matter) and smears the orders above; each
+    octave is read with the length that keeps the most bins there.
+
+    ``t`` (uniform), ``residual`` ``(N, channels)``, ``speed`` the spin rate (rad per unit
+    time), ``whirl(speed)`` the free whirl frequencies (rad per unit time) at a speed.
+    """
+    t = np.asarray(t, dtype=float)
+    r = np.asarray(residual, dtype=float).reshape(len(t), -1)
+    speed = np.abs(np.asarray(speed, dtype=float))
+    n = len(t)
+    empty = OffOrderNoise((), np.empty(0), np.empty(0), np.empty(0), np.empty(0, dtype=int))
+    if n < 256:
+        return empty
+    dt = float(np.median(np.diff(t)))
+    nyq = 0.5 / dt
+    f1 = speed / (2 * math.pi)
+    sweep = float(np.median(np.abs(np.gradient(f1, t))))
+    span = 1.0 / math.sqrt(sweep) if sweep > 0 else t[-1] - t[0]
+    L0 = int(min(max(round(span / dt), 128), n // 4))
+    top = min(above, 0.75 * nyq)
+    fine = np.linspace(0.0, nyq, 8193)
+    dens = density(fine)
+    total = float(np.sum(dens) * (fine[1] - fine[0]))
+    reads = [_off_order_bins(r, f1, dt, L, density, whirl, orders) for L in
+             sorted({min(L0 * 2 ** j, n // 4) for j in range(6)})]
+    # the reference: above the response, read with the shortest window (the most bins there)
+    ratio0, at0, _ = reads[0]
+    ref_sel = at0 > above
+    ref = float(np.median(ratio0[ref_sel]) / math.log(2.0)) if ref_sel.sum() >= MIN_BAND_BINS else 1.0
+    lowest = min(LEAK_BINS * df for _, _, df in reads)
+    edges = [top]
+    while edges[-1] / 2 > lowest:
+        edges.append(edges[-1] / 2)
+    edges = edges[::-1]
+    bands, lev, low, wt, cnt = [], [], [], [], []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        best = max(((ratio[(at >= lo) & (at < hi)]) for ratio, at, _ in reads), key=len)
+        m = len(best)
+        R = float(np.median(best) / math.log(2.0)) / ref if m >= MIN_BAND_BINS else math.nan
+        inside = (fine >= lo) & (fine < hi)
+        bands.append((float(lo), float(hi)))
+        lev.append(R)
+        # a median of m exponential variables: standard error 1.44 / sqrt(m) relative, the
+        # bins counted a third (a window's neighbours and the half overlap are correlated)
+        low.append(1.44 * math.sqrt(3.0 / max(m, 1)) * R)
+        wt.append(float(np.sum(dens[inside]) * (fine[1] - fine[0])) / total if total > 0 else 0.0)
+        cnt.append(m)
+    return OffOrderNoise(tuple(bands), np.array(lev), np.array(low), np.array(wt), np.array(cnt, dtype=int))
+
+
+def _off_order_bins(r: np.ndarray, f1: np.ndarray, dt: float, L: int, density, whirl,
+                    orders: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray, float]:
+    """The periodogram bins of windows ``L`` long clear of the orders and the free whirl
+    (:func:`off_order_noise`), each over the model's density: ``(ratios, frequencies, bin width)``."""
+    n = len(r)
+    win = np.hanning(L)
+    nu = np.fft.rfftfreq(L, dt)
+    df = float(nu[1])
+    model = np.maximum(density(nu), 1e-300)
+    keep_nu = (nu > LEAK_BINS * df) & (nu < 0.375 / dt)
+    norm = 2.0 * dt / float(np.sum(win * win))
+    ratios, where = [], []
+    for i0 in range(0, n - L + 1, L // 2):
+        fr = f1[i0:i0 + L]
+        c1, d1 = float(np.mean(fr)), float(np.ptp(fr))
+        ok = keep_nu.copy()
+        for o in orders:
+            ok &= np.abs(nu - o * c1) > o * d1 / 2 + LEAK_BINS * df
+        for w in np.atleast_1d(whirl(2 * math.pi * c1)):
+            fw = abs(float(w)) / (2 * math.pi)
+            ok &= np.abs(nu - fw) > WHIRL_WIDTH * fw + LEAK_BINS * df
+        if not ok.any():
+            continue
+        seg = r[i0:i0 + L] - r[i0:i0 + L].mean(axis=0)
+        p = norm * np.abs(np.fft.rfft(seg * win[:, None], axis=0)) ** 2
+        for c in range(r.shape[1]):
+            ratios.append(p[ok, c] / model[ok])
+            where.append(nu[ok])
+    if not ratios:
+        return np.empty(0), np.empty(0), df
+    return np.concatenate(ratios), np.concatenate(where), df

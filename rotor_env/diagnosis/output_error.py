@@ -484,6 +484,9 @@ class ShootingGrid:
     #: knot spacing (model time) of the probes' slowly moving mean fitted with every model
     #: (:func:`_baseline_fit`); ``None``: only the static offsets
     baseline_spacing: float | None = None
+    #: the noise's lag-one correlation at the rate of the record the grid was decimated from
+    #: (AR(1); 0: white): the shape of :meth:`noise_density`
+    noise_rho: float = 0.0
 
     @classmethod
     def from_arrays(cls, t, phi, phid, th_x, th_y, ip: float, *, noise_std: float | None = None,
@@ -554,7 +557,7 @@ class ShootingGrid:
             raise ValueError(f"baseline_spacing must be a positive number, got {baseline_spacing!r}")
         return cls(t, np.asarray(phi, float), np.asarray(phid, float), y, rates, seg, float(ip), sigma, q,
                    None if noise_std is None else float(noise_std), nsub, tau,
-                   None if baseline_spacing is None else float(baseline_spacing))
+                   None if baseline_spacing is None else float(baseline_spacing), float(noise_rho))
 
     @property
     def n(self) -> int:
@@ -615,6 +618,29 @@ class ShootingGrid:
         B = BSpline.design_matrix(t, spline_knots(float(t[0]), float(t[-1]), self.baseline_spacing), 3).tocsr()
         G = (B.T @ B).toarray()
         return B, cho_factor(G + 1e-12 * np.trace(G) / len(G) * np.eye(len(G)))
+
+    def noise_density(self, nu: np.ndarray) -> np.ndarray:
+        """The one-sided spectral density of the grid's noise model at ``nu`` (cycles per unit of
+        model time): AR(1) noise of lag-one correlation :attr:`noise_rho` at the input rate,
+        through the decimating FIR, scaled so that it integrates to ``noise_std^2`` over the
+        grid's band (white noise on an undecimated grid: flat)."""
+        nu = np.asarray(nu, dtype=float)
+        dt = float(np.median(np.diff(self.t)))
+        q = max(int(self.decimation), 1)
+        w_in = 2.0 * math.pi * nu * dt / q  # radians per input sample
+        shape = 1.0 / (1.0 - 2.0 * self.noise_rho * np.cos(w_in) + self.noise_rho ** 2)
+        fine = np.linspace(0.0, 0.5 / dt, 4097)
+        w_fine = 2.0 * math.pi * fine * dt / q
+        norm = 1.0 / (1.0 - 2.0 * self.noise_rho * np.cos(w_fine) + self.noise_rho ** 2)
+        if q > 1:
+            taps = decimation_filter(q)
+            k = np.arange(len(taps))
+            gain = np.abs(np.exp(-1j * np.outer(w_in, k)) @ taps) ** 2
+            shape = shape * gain.reshape(shape.shape)
+            norm = norm * np.abs(np.exp(-1j * np.outer(w_fine, k)) @ taps) ** 2
+        total = float(np.sum(0.5 * (norm[1:] + norm[:-1])) * (fine[1] - fine[0]))
+        var = float(self.noise_std) ** 2 if self.noise_std else 0.0
+        return var * shape / total
 
     def start_states(self) -> np.ndarray:
         i = self.segments[:, 0]
