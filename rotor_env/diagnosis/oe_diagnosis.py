@@ -295,15 +295,26 @@ def _constancy(fit: OutputErrorFit, floor: float, alpha: float) -> ParameterChan
         return None
 
 
-def _excess(fit: OutputErrorFit, floor: float) -> float:
+def _excess(fit: OutputErrorFit, floor: float, uncertainty: float = FLOOR_UNCERTAINTY) -> float:
     """The residual energy above the noise floor that a candidate's relevance is measured
-    against: never less than the floor's own uncertainty's share (:data:`FLOOR_UNCERTAINTY`)."""
-    return _excess_of(fit.rss, fit.n_rows, floor)
+    against: never less than the floor's own uncertainty's share (:data:`FLOOR_UNCERTAINTY`,
+    more where the floor counts the noise in the rotor's band: :func:`_floor_uncertainty`)."""
+    return _excess_of(fit.rss, fit.n_rows, floor, uncertainty)
 
 
-def _excess_of(rss: float, n_rows: int, floor: float) -> float:
+def _excess_of(rss: float, n_rows: int, floor: float, uncertainty: float = FLOOR_UNCERTAINTY) -> float:
     noise = floor * floor * n_rows
-    return max(rss - noise, ((1.0 + FLOOR_UNCERTAINTY) ** 2 - 1.0) * noise)
+    return max(rss - noise, ((1.0 + uncertainty) ** 2 - 1.0) * noise)
+
+
+def _floor_uncertainty(noise: OffOrderNoise) -> float:
+    """The floor's relative uncertainty (RMS): :data:`FLOOR_UNCERTAINTY` for the level read above
+    the response; where the floor counts the noise in the rotor's band, two standard errors of
+    its variance factor too (a few hundred periodogram bins an octave leave the low octaves'
+    levels uncertain by tens of per cent: an effect that takes a share of that noise is not
+    relevant for it)."""
+    f = noise.variance_factor
+    return max(FLOOR_UNCERTAINTY, math.sqrt(1.0 + 2.0 * noise.variance_factor_se / f) - 1.0)
 
 
 def _screening_grid(fit: OutputErrorFit) -> tuple[ShootingGrid, np.ndarray, float, int]:
@@ -804,6 +815,13 @@ def diagnose_output_error(
 
     start = equation_error_start(grid, model)
     base = fit_output_error(grid, model, start)
+    # the probes' noise in the rotor's band, read off the starting model's residual between
+    # the shaft's orders (a misfit at them stays out of the bins read): 1/f noise lifts it
+    # above the level read above the response, and the search's relevance rule measures what
+    # an effect removes against the residual above the floor (read again from the final model)
+    white = floor
+    in_band = in_band_noise(base)
+    floor, unc = white * math.sqrt(in_band.variance_factor), _floor_uncertainty(in_band)
     say(f"starting model fitted: residual {base.rms / floor:.3g}x the noise floor")
     current, cur_model, added = base, tuple(model), []
     tried: list[Candidate] = []
@@ -821,7 +839,7 @@ def diagnose_output_error(
         if current.rms / floor <= SEARCH_RATIO:
             # the residual energy cannot tell; the score tests can (module docstring)
             detect, detect_of = assess_all(current, undetermined(cur_model), alpha=alpha / n_lib,
-                                           min_fall=RELEVANT_SHARE * _excess(current, floor)), current
+                                           min_fall=RELEVANT_SHARE * _excess(current, floor, unc)), current
             todo, trace = _leaning(detect, alpha / n_lib)
             if trace:
                 notes.append(f"round {rnd}: the residual ({current.rms / floor:.4g}x the floor) leans most towards "
@@ -836,9 +854,9 @@ def diagnose_output_error(
                          + ", ".join(f"{c} (score test log10 p = {detect[c].score_log10_p:.3g})"
                                      for c in todo if c in detect)
                          + ": tried")
-        excess = _excess(current, floor)
+        excess = _excess(current, floor, unc)
         screen_grid, screen_x0, screen_rss, screen_rows = _screening_grid(current)
-        screen_excess = _excess_of(screen_rss, screen_rows, floor)
+        screen_excess = _excess_of(screen_rss, screen_rows, floor, unc)
         fits = {}
         step(f"waveforms, round {rnd}: output-error screening of each candidate", total=len(todo), unit="candidates")
         for c in todo:
@@ -987,14 +1005,11 @@ def diagnose_output_error(
         # hold only near an optimum (a record at one speed, 1200-1210 rpm, crawls along a
         # valley of stiffness, damping and unbalance: 1X at one speed holds two numbers)
         current = _run_on(current, floor, notes)
-    # the probes' noise in the rotor's band, read off the final model's residual between the
-    # shaft's orders: 1/f noise lifts it above the level read above the response.  Read after
-    # the search, not before it: a model that lacks a hinge crack leaves its harmonics in that
-    # band at low speed, which would raise the floor the search decides against
+    # the in-band noise again, from the model the search ended with (the one the verdict is on)
     in_band = in_band_noise(current)
+    floor, unc = white * math.sqrt(in_band.variance_factor), _floor_uncertainty(in_band)
     if in_band.variance_factor > 1.0:
         notes.append(_coloured_note(in_band, current))
-        floor *= math.sqrt(in_band.variance_factor)
         say(f"the probes' noise is coloured in the rotor's band: the floor {math.sqrt(in_band.variance_factor):.4g}x "
             "the level above the response")
     # one model for the whole record: is it the same rotor all through? (a crack that opens
@@ -1030,7 +1045,7 @@ def diagnose_output_error(
     step("waveforms: what the record cannot decide (detectability of the effects not named)")
     if detect_of is not current:
         detect = assess_all(current, undetermined(cur_model), alpha=alpha / n_lib,
-                            min_fall=RELEVANT_SHARE * _excess(current, floor))
+                            min_fall=RELEVANT_SHARE * _excess(current, floor, unc))
     say(f"detectability of {len(detect)} effects not named: "
         f"{sum(not d.decidable for d in detect.values())} cannot be decided")
     parts = None

@@ -82,6 +82,11 @@ MISFIT_ORDERS = (1 / 3, 1 / 2, 2 / 3, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)
 #: half-width of the band around each free whirl frequency left out (a share of it: a rub's
 #: contact, the supports' anisotropy or the gyroscopic split move it)
 WHIRL_WIDTH = 0.25
+#: a window whose residual power stands this far above the windows' median is where the model
+#: fails, not noise: it is not read (the noise is stationary; a misfit is not -- a model without
+#: its crack leaves it around the critical, where the shooting segments' restarts and the
+#: resonance's passage spread it to low frequencies)
+FRAME_RATIO = 1.5
 #: bins left out either side of an order or a whirl band: the Blackman-Harris window's main
 #: lobe is four bins wide each way (and a bin's offset) and its side lobes 92 dB down, so a misfit line a hundred
 #: times the noise leaks nothing into the bins read (a Hann window's leaked, and a cracked
@@ -151,6 +156,20 @@ class OffOrderNoise:
             used[b] = (math.sqrt(used[below[-1]] * used[b + 1 + above[0]])
                        if below.size and above.size else 1.0)
         return used
+
+    @property
+    def variance_factor_se(self) -> float:
+        """The standard error of :attr:`variance_factor` (0 where the bands are not coloured):
+        each band read with its own, one between two read ones with the larger of theirs."""
+        if not self.coloured:
+            return 0.0
+        se = np.where(self.read, self.se, 0.0)
+        for b in np.flatnonzero(~self.read):
+            below = np.flatnonzero(self.read[:b])
+            above = np.flatnonzero(self.read[b + 1:])
+            if below.size and above.size:
+                se[b] = max(se[below[-1]], se[b + 1 + above[0]])
+        return float(math.sqrt(np.sum((self.weight * se) ** 2)))
 
     @property
     def variance_factor(self) -> float:
@@ -230,32 +249,37 @@ def off_order_noise(t: np.ndarray, residual: np.ndarray, speed: np.ndarray, whir
 
 def _off_order_bins(r: np.ndarray, f1: np.ndarray, dt: float, L: int, density, whirl,
                     orders: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray, float]:
-    """The periodogram bins of windows ``L`` long clear of the orders and the free whirl
-    (:func:`off_order_noise`), each over the model's density: ``(ratios, frequencies, bin width)``."""
-    n = len(r)
+    """The periodogram bins of windows ``L`` long clear of the orders and the free whirl, in
+    windows whose residual power is not far above the others' (:func:`off_order_noise`), each
+    over the model's density: ``(ratios, frequencies, bin width)``."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
     win = np.hanning(L)
     nu = np.fft.rfftfreq(L, dt)
     df = float(nu[1])
     model = np.maximum(density(nu), 1e-300)
-    keep_nu = (nu > LEAK_BINS * df) & (nu < 0.375 / dt)
+    hop = L // 2
+    starts = np.arange(0, len(r) - L + 1, hop)
+    frames = sliding_window_view(f1, L)[starts]
+    c1 = frames.mean(axis=1)[:, None]
+    d1 = np.ptp(frames, axis=1)[:, None]
+    ok = np.broadcast_to((nu > LEAK_BINS * df) & (nu < 0.375 / dt), (len(starts), len(nu))).copy()
+    for o in orders:
+        ok &= np.abs(nu - o * c1) > o * d1 / 2 + LEAK_BINS * df
+    fw = np.abs(np.array([np.atleast_1d(whirl(2 * math.pi * c)) for c in c1[:, 0]], dtype=float)) / (2 * math.pi)
+    for j in range(fw.shape[1]):
+        w = fw[:, j:j + 1]
+        ok &= np.abs(nu - w) > WHIRL_WIDTH * w + LEAK_BINS * df
+    segs = [sliding_window_view(r[:, c], L)[starts] for c in range(r.shape[1])]
+    segs = [x - x.mean(axis=1, keepdims=True) for x in segs]
+    power = sum(np.mean(x * x, axis=1) for x in segs)
+    ok &= (power <= FRAME_RATIO * np.median(power))[:, None]
+    if not ok.any():
+        return np.empty(0), np.empty(0), df
     norm = 2.0 * dt / float(np.sum(win * win))
     ratios, where = [], []
-    for i0 in range(0, n - L + 1, L // 2):
-        fr = f1[i0:i0 + L]
-        c1, d1 = float(np.mean(fr)), float(np.ptp(fr))
-        ok = keep_nu.copy()
-        for o in orders:
-            ok &= np.abs(nu - o * c1) > o * d1 / 2 + LEAK_BINS * df
-        for w in np.atleast_1d(whirl(2 * math.pi * c1)):
-            fw = abs(float(w)) / (2 * math.pi)
-            ok &= np.abs(nu - fw) > WHIRL_WIDTH * fw + LEAK_BINS * df
-        if not ok.any():
-            continue
-        seg = r[i0:i0 + L] - r[i0:i0 + L].mean(axis=0)
-        p = norm * np.abs(np.fft.rfft(seg * win[:, None], axis=0)) ** 2
-        for c in range(r.shape[1]):
-            ratios.append(p[ok, c] / model[ok])
-            where.append(nu[ok])
-    if not ratios:
-        return np.empty(0), np.empty(0), df
+    for seg in segs:
+        p = norm * np.abs(np.fft.rfft(seg * win, axis=1)) ** 2
+        ratios.append((p / model)[ok])
+        where.append(np.broadcast_to(nu, ok.shape)[ok])
     return np.concatenate(ratios), np.concatenate(where), df

@@ -70,7 +70,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from functools import cache, cached_property
+from functools import cache, cached_property, lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -380,6 +380,22 @@ def _kernel(effects: tuple[str, ...]) -> _Kernel:
     return k
 
 
+@lru_cache(maxsize=16)
+def _decimated_noise_shape(q: int, rho: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """AR(1) noise's density shape ``1 / |1 - rho e^{-iw}|^2`` through the decimating FIR's
+    ``|H(w)|^2`` on a dense grid of input-rate frequencies ``w`` in ``[0, pi / q]``, and its
+    mean there (the grid's band)."""
+    n = 1 << 17
+    w = np.linspace(0.0, math.pi, n // 2 + 1)
+    shape = 1.0 / (1.0 - 2.0 * rho * np.cos(w) + rho * rho)
+    if q > 1:
+        shape = shape * np.abs(np.fft.rfft(decimation_filter(q), n)) ** 2
+    band = w <= math.pi / q
+    w, shape = w[band], shape[band]
+    mean = float(np.sum(0.5 * (shape[1:] + shape[:-1]) * np.diff(w)) / (w[-1] - w[0]))
+    return w, shape, mean
+
+
 def decimation_filter(q: int) -> np.ndarray:
     """The low-pass FIR of the decimation by ``q``: Kaiser window (beta 12, about 1e-6 ripple
     and -100 dB), cut at 0.8 of the new Nyquist, 64 q + 1 taps, unit gain at DC.  A record
@@ -624,23 +640,13 @@ class ShootingGrid:
         model time): AR(1) noise of lag-one correlation :attr:`noise_rho` at the input rate,
         through the decimating FIR, scaled so that it integrates to ``noise_std^2`` over the
         grid's band (white noise on an undecimated grid: flat)."""
-        nu = np.asarray(nu, dtype=float)
         dt = float(np.median(np.diff(self.t)))
         q = max(int(self.decimation), 1)
-        w_in = 2.0 * math.pi * nu * dt / q  # radians per input sample
-        shape = 1.0 / (1.0 - 2.0 * self.noise_rho * np.cos(w_in) + self.noise_rho ** 2)
-        fine = np.linspace(0.0, 0.5 / dt, 4097)
-        w_fine = 2.0 * math.pi * fine * dt / q
-        norm = 1.0 / (1.0 - 2.0 * self.noise_rho * np.cos(w_fine) + self.noise_rho ** 2)
-        if q > 1:
-            taps = decimation_filter(q)
-            k = np.arange(len(taps))
-            gain = np.abs(np.exp(-1j * np.outer(w_in, k)) @ taps) ** 2
-            shape = shape * gain.reshape(shape.shape)
-            norm = norm * np.abs(np.exp(-1j * np.outer(w_fine, k)) @ taps) ** 2
-        total = float(np.sum(0.5 * (norm[1:] + norm[:-1])) * (fine[1] - fine[0]))
+        w, shape, mean = _decimated_noise_shape(q, float(self.noise_rho))
+        w_in = 2.0 * math.pi * np.asarray(nu, dtype=float) * dt / q  # radians per input sample
         var = float(self.noise_std) ** 2 if self.noise_std else 0.0
-        return var * shape / total
+        # the grid's band (0, 1 / (2 dt)) is (0, pi / q) at the input rate: mean density there
+        return var * 2.0 * dt * np.interp(w_in, w, shape) / mean
 
     def start_states(self) -> np.ndarray:
         i = self.segments[:, 0]
