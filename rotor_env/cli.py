@@ -212,6 +212,9 @@ def _add_simulate_parser(sub) -> None:
     g.add_argument("--sample-rate", type=float, default=5000.0, help="samples per second (default 5000)")
     g.add_argument("--runout", metavar="AMP[:PHASE]", help="probe-track runout: 1X amplitude (rig unit) and phase "
                    "(degrees)")
+    g.add_argument("--flicker-hz", type=float, default=0.0, metavar="HZ",
+                   help="the probes' 1/f noise corner: their noise density the white --noise's times 1 + HZ / f "
+                        "(default 0: white)")
     p.set_defaults(func=_cmd_simulate)
 
 
@@ -352,6 +355,8 @@ def _simulate_rig(args: argparse.Namespace, values: dict, ip: float, crack, out)
     params = RotorParams(ip=0.0 if rig.model == "translation" else ip, values=values, effects=tuple(effects),
                          crack=crack)
     rpm_from, rpm_to = _parse_range(args.rpm)
+    if not (math.isfinite(args.flicker_hz) and args.flicker_hz >= 0):
+        raise _UsageError(f"--flicker-hz must be a finite number >= 0 (Hz), got {args.flicker_hz!r}")
     runout, runout_phase = (0.0, 0.0)
     if args.runout:
         parts = args.runout.split(":")
@@ -360,7 +365,7 @@ def _simulate_rig(args: argparse.Namespace, values: dict, ip: float, crack, out)
     run = simulate_rig(rig, params, natural_rpm=args.natural_rpm, rpm_from=rpm_from, rpm_to=rpm_to,
                        rpm_per_s=math.copysign(abs(args.rpm_per_s), rpm_to - rpm_from),
                        sample_rate=args.sample_rate, noise=args.noise or 0.0, runout=runout,
-                       runout_phase_deg=runout_phase, seed=args.seed)
+                       runout_phase_deg=runout_phase, flicker_hz=args.flicker_hz, seed=args.seed)
     if args.vectors:
         table = run.vectors(rig)
         table.to_csv(out, phase="lag", overwrite=args.force)

@@ -226,3 +226,37 @@ def test_simulate_rig_refuses_a_flicker_corner_that_is_not_a_number(one_plane):
     with pytest.raises(ValueError, match="flicker_hz"):
         simulate_rig(one_plane, _rotor(), rpm_from=600.0, rpm_to=900.0, rpm_per_s=300.0, sample_rate=1000.0,
                      noise=0.5, flicker_hz=float("nan"))
+
+
+def test_cli_simulate_writes_one_over_f_probe_noise(tmp_path):
+    """``rotor-id simulate --rig ... --flicker-hz 100``: the record less the same seed's white
+    record is the 1/f noise alone, whose Welch density is the white noise's times ``100 / f``
+    (within 20 % in bands of +-25 % about 50-800 Hz); a corner that is not a number is refused
+    with exit code 2."""
+    import subprocess
+    import sys
+
+    import pandas as pd
+    from scipy.signal import welch
+
+    (tmp_path / "rig.yaml").write_text("keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n")
+
+    def simulate(out, *extra):
+        return subprocess.run([sys.executable, "-m", "rotor_env.cli", "simulate", out, "--rig", "rig.yaml",
+                               "--noise", "0.5", "--seed", "3", "--sample-rate", "2000", "--rpm", "300:1200",
+                               "--rpm-per-s", "100", *extra], cwd=tmp_path, capture_output=True, text=True,
+                              timeout=600)
+
+    assert simulate("white.csv").returncode == 0
+    r = simulate("pink.csv", "--flicker-hz", "100")
+    assert r.returncode == 0, r.stderr
+    white, pink = pd.read_csv(tmp_path / "white.csv"), pd.read_csv(tmp_path / "pink.csv")
+    for probe in ("x", "y"):
+        f, p = welch((pink[probe] - white[probe]).to_numpy(), fs=2000.0, nperseg=1024)
+        for fr in (50.0, 100.0, 200.0, 400.0, 800.0):
+            band = (f > fr / 1.25) & (f < fr * 1.25)  # 11 to 184 bins of ~35 averages each
+            expected = 2.0 * 0.5 ** 2 / 2000.0 * float(np.mean(100.0 / f[band]))
+            assert float(np.mean(p[band])) == pytest.approx(expected, rel=0.2), (probe, fr)
+    bad = simulate("bad.csv", "--flicker-hz", "nan")
+    assert bad.returncode == 2 and "--flicker-hz" in bad.stderr
+    assert not (tmp_path / "bad.csv").exists()
