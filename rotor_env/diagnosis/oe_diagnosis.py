@@ -490,9 +490,7 @@ def in_band_noise(fit: OutputErrorFit) -> OffOrderNoise:
     W^2 + 4 k)) / 2`` with the fitted stiffness ``k`` (the gyroscopic pair; ``sqrt(k)``
     without it)."""
     g = fit.grid
-    k_name = f"{TIME_UNIT_EFFECT}.k"
-    k = fit.value(k_name) if k_name in fit.names else 1.0
-    k = k if math.isfinite(k) and k > 0 else 1.0
+    k = _fitted_stiffness(fit)
     ip = float(g.ip)
 
     def whirl(w: float) -> list[float]:
@@ -504,11 +502,17 @@ def in_band_noise(fit: OutputErrorFit) -> OffOrderNoise:
     return off_order_noise(g.t[rows], fit.residual[rows], g.phid[rows], whirl, g.noise_density, above=above)
 
 
+def _fitted_stiffness(fit: OutputErrorFit) -> float:
+    """The fitted shaft stiffness ``k`` (the natural frequency is ``sqrt(k)`` in model time);
+    1 where the fit holds it, or where it is not a positive number."""
+    k_name = f"{TIME_UNIT_EFFECT}.k"
+    k = fit.value(k_name) if k_name in fit.names else 1.0
+    return k if math.isfinite(k) and k > 0 else 1.0
+
+
 def _coloured_note(noise: OffOrderNoise, fit: OutputErrorFit) -> str:
     """What the in-band noise did to the floor, the bands named in the natural frequency."""
-    k_name = f"{TIME_UNIT_EFFECT}.k"
-    wn = math.sqrt(max(fit.value(k_name), 1e-12)) if k_name in fit.names else 1.0
-    per = 2.0 * math.pi / wn  # a band in cycles per unit time, over the natural frequency
+    per = 2.0 * math.pi / math.sqrt(_fitted_stiffness(fit))  # cycles per unit time -> per natural frequency
     bands = ", ".join(f"{r:.3g}x at {lo * per:.2g}-{hi * per:.2g}"
                       for (lo, hi), r, up in zip(noise.bands, noise.ratio, noise.raised, strict=True) if up)
     return (f"the probes' noise is coloured in the rotor's band (log10 p = {noise.log10_p:.3g} that it is at the level "

@@ -87,10 +87,9 @@ WHIRL_WIDTH = 0.25
 #: its crack leaves it around the critical, where the shooting segments' restarts and the
 #: resonance's passage spread it to low frequencies)
 FRAME_RATIO = 1.5
-#: bins left out either side of an order or a whirl band: the Blackman-Harris window's main
-#: lobe is four bins wide each way (and a bin's offset) and its side lobes 92 dB down, so a misfit line a hundred
-#: times the noise leaks nothing into the bins read (a Hann window's leaked, and a cracked
-#: record's missing crack raised its floor by 3 %)
+#: bins left out either side of an order or a whirl band: the Hann window's main lobe is two
+#: bins wide each way and its side lobes fall 18 dB an octave, so four bins off a misfit line
+#: 25 times the noise leave nothing a band's median reads (tests/test_coloured_noise.py)
 LEAK_BINS = 4
 #: periodogram bins a band needs to be read
 MIN_BAND_BINS = 32
@@ -150,11 +149,8 @@ class OffOrderNoise:
         if not self.coloured:
             return np.ones(len(self.bands))
         used = np.where(self.read, self.ratio, 1.0)
-        for b in np.flatnonzero(~self.read):
-            below = np.flatnonzero(self.read[:b])
-            above = np.flatnonzero(self.read[b + 1:])
-            used[b] = (math.sqrt(used[below[-1]] * used[b + 1 + above[0]])
-                       if below.size and above.size else 1.0)
+        for b, lo, hi in self._between():
+            used[b] = math.sqrt(used[lo] * used[hi])
         return used
 
     @property
@@ -164,12 +160,16 @@ class OffOrderNoise:
         if not self.coloured:
             return 0.0
         se = np.where(self.read, self.se, 0.0)
-        for b in np.flatnonzero(~self.read):
-            below = np.flatnonzero(self.read[:b])
-            above = np.flatnonzero(self.read[b + 1:])
-            if below.size and above.size:
-                se[b] = max(se[below[-1]], se[b + 1 + above[0]])
+        for b, lo, hi in self._between():
+            se[b] = max(se[lo], se[hi])
         return float(math.sqrt(np.sum((self.weight * se) ** 2)))
+
+    def _between(self) -> list[tuple[int, int, int]]:
+        """Each band not read that has read bands on both sides: ``(band, nearest below,
+        nearest above)``."""
+        read = np.flatnonzero(self.read)
+        return [(int(b), int(read[read < b][-1]), int(read[read > b][0]))
+                for b in np.flatnonzero(~self.read) if read.size and read[0] < b < read[-1]]
 
     @property
     def variance_factor(self) -> float:
@@ -185,8 +185,9 @@ def off_order_noise(t: np.ndarray, residual: np.ndarray, speed: np.ndarray, whir
     A model's misfit is locked to the shaft -- at its orders (:data:`MISFIT_ORDERS`) -- or
     rings at a free whirl frequency; the probes' noise is neither.  So the residual's
     short-time periodogram (Hann windows, half overlapping) is read only at bins clear of
-    every order ``o f_1X`` (by the window's sweep ``o df_1X / 2`` and three bins) and of each
-    free whirl frequency (by :data:`WHIRL_WIDTH` of it).  Each bin is divided by the noise
+    every order ``o f_1X`` (by the window's sweep ``o df_1X / 2`` and :data:`LEAK_BINS`) and
+    of each free whirl frequency (by :data:`WHIRL_WIDTH` of it), in windows whose residual
+    power is within :data:`FRAME_RATIO` of the windows' median.  Each bin is divided by the noise
     model's density there (``density(nu)``, one-sided, integrating to the model's variance),
     and each octave's level is the median of those ratios over ``ln 2`` (a periodogram bin is
     the density times an exponential variable of mean one: the median ignores a few lines and
@@ -231,7 +232,7 @@ def off_order_noise(t: np.ndarray, residual: np.ndarray, speed: np.ndarray, whir
     while edges[-1] / 2 > lowest:
         edges.append(edges[-1] / 2)
     edges = edges[::-1]
-    bands, lev, low, wt, cnt = [], [], [], [], []
+    bands, lev, ses, wt, cnt = [], [], [], [], []
     for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         best = max(((ratio[(at >= lo) & (at < hi)]) for ratio, at, _ in reads), key=len)
         m = len(best)
@@ -241,10 +242,10 @@ def off_order_noise(t: np.ndarray, residual: np.ndarray, speed: np.ndarray, whir
         lev.append(R)
         # a median of m exponential variables: standard error 1.44 / sqrt(m) relative, the
         # bins counted a third (a window's neighbours and the half overlap are correlated)
-        low.append(1.44 * math.sqrt(3.0 / max(m, 1)) * R)
+        ses.append(1.44 * math.sqrt(3.0 / max(m, 1)) * R)
         wt.append(float(np.sum(dens[inside]) * (fine[1] - fine[0])) / total if total > 0 else 0.0)
         cnt.append(m)
-    return OffOrderNoise(tuple(bands), np.array(lev), np.array(low), np.array(wt), np.array(cnt, dtype=int))
+    return OffOrderNoise(tuple(bands), np.array(lev), np.array(ses), np.array(wt), np.array(cnt, dtype=int))
 
 
 def _off_order_bins(r: np.ndarray, f1: np.ndarray, dt: float, L: int, density, whirl,
