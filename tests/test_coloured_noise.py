@@ -260,3 +260,45 @@ def test_cli_simulate_writes_one_over_f_probe_noise(tmp_path):
     bad = simulate("bad.csv", "--flicker-hz", "nan")
     assert bad.returncode == 2 and "--flicker-hz" in bad.stderr
     assert not (tmp_path / "bad.csv").exists()
+
+
+def test_a_model_that_misses_the_record_far_does_not_read_its_misfit_as_noise(tmp_path):
+    """A two-disk rotor with an open crack (``benchmarks/foreign_rig.py``'s ``two_modes_crack``,
+    seed 11: the second mode at 1.45 times the first, in the run; 0.5 um *white* noise) under
+    the one-mode starting model, which misses it by ~20x: each shooting segment's start state
+    takes the misfit's local shape and the residual steps at every cut (the steps many times the
+    sample-to-sample change), so the band between the orders reads coloured -- the control, a
+    reading no white probe gives.  The floor does not count it (the model stands more than
+    ``COLOUR_MISFIT_RATIO`` above even the coloured floor): it stays the level read above the
+    response, with a note saying why."""
+    import sys
+    from pathlib import Path
+
+    from rotor_env.diagnosis import oe_diagnosis as oe
+    from rotor_env.diagnosis.from_rig import waveform_grid
+    from rotor_env.diagnosis.from_vectors import diagnose_vectors
+    from rotor_env.diagnosis.output_error import equation_error_start, fit_output_error
+    from rotor_env.measurements.rig import load_rig
+    from rotor_env.measurements.waveforms import load_waveforms
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import foreign_rig as fr
+
+    _, _, out = fr.make_record("two_modes_crack", 11, 0.5, fs=5000.0)
+    rig_path, data_path = fr.write_record(tmp_path, "two_modes_crack", out["columns"])
+    record = load_waveforms(data_path, load_rig(rig_path))
+    grid, _ = waveform_grid(record, diagnose_vectors(record.vectors((1,)), ip=record.rig.ip).after.w_ref)
+    model = ["unbalance", "viscous_damping"]
+    base = fit_output_error(grid, model, equation_error_start(grid, model))
+    white = float(grid.noise_std)
+    assert base.rms > 10.0 * white
+    # the mechanism: the residual steps at the segments' cuts
+    step = np.diff(base.residual, axis=0)
+    cuts = grid.segments[1:, 0] - 1
+    assert np.sqrt(np.mean(step[cuts] ** 2)) > 5.0 * np.sqrt(np.mean(np.delete(step, cuts, axis=0) ** 2))
+    noise = oe.in_band_noise(base)
+    assert noise.coloured and noise.variance_factor > 1.5, noise.variance_factor  # the control
+    floor, uncertainty, counted = oe._floor_with_band(base, white, noise)
+    assert (floor, uncertainty, counted) == (white, oe.FLOOR_UNCERTAINTY, False)
+    note = oe._misfit_between_orders_note(noise, base, white)
+    assert "not counted" in note and f"{base.rms / (white * math.sqrt(noise.variance_factor)):.3g}x" in note

@@ -78,6 +78,14 @@ SEARCH_RATIO = 1.02
 FLOOR_UNCERTAINTY = 0.02
 #: a candidate must remove this share of the residual energy above the floor
 RELEVANT_SHARE = 0.1
+#: the noise in the rotor's band (read between the shaft's orders) counts in the floor only off
+#: a model whose residual stands within this factor of the floor it gives: a model that misses
+#: the record by more leaves its misfit between the orders too -- each shooting segment's start
+#: state takes the misfit's local shape, and the residual steps at every cut (a two-disk
+#: rotor's record under a one-mode model, 25x its floor: steps 28x the sample-to-sample
+#: change, read as 1340x "noise" at 0.1 times the natural frequency).  White records whose
+#: model lacks a crack read white up to 5.6x; 1/f records' final models stand at 1.0-1.12x
+COLOUR_MISFIT_RATIO = 2.0
 #: crack vs rub: the asymmetry of the low- and high-amplitude halves may differ by this
 #: many standard errors (and by a third) before the crack is turned down
 CRACK_SPLIT_Z = 4.0
@@ -502,6 +510,28 @@ def in_band_noise(fit: OutputErrorFit) -> OffOrderNoise:
     return off_order_noise(g.t[rows], fit.residual[rows], g.phid[rows], whirl, g.noise_density, above=above)
 
 
+def _floor_with_band(fit: OutputErrorFit, white: float, noise: OffOrderNoise) -> tuple[float, float, bool]:
+    """The noise floor off ``fit``'s residual, its relative uncertainty, and whether the noise
+    in the rotor's band counts in it: where the band reads coloured and ``fit`` stands within
+    :data:`COLOUR_MISFIT_RATIO` of the coloured floor; else the level read above the response
+    (``white``), :data:`FLOOR_UNCERTAINTY`."""
+    if noise.variance_factor > 1.0:
+        coloured = white * math.sqrt(noise.variance_factor)
+        if fit.rms <= COLOUR_MISFIT_RATIO * coloured:
+            return coloured, _floor_uncertainty(noise), True
+    return white, FLOOR_UNCERTAINTY, False
+
+
+def _misfit_between_orders_note(noise: OffOrderNoise, fit: OutputErrorFit, white: float) -> str:
+    """Why a coloured reading between the orders was not counted in the floor."""
+    coloured = white * math.sqrt(noise.variance_factor)
+    return (f"the band between the shaft's orders reads above the level read above the response (the floor would be "
+            f"{math.sqrt(noise.variance_factor):.4g}x it), but the model misses the record by {fit.rms / coloured:.3g}x "
+            f"even that floor (more than {COLOUR_MISFIT_RATIO:g}x): its shooting segments' start states take the misfit's "
+            "local shape and the residual steps at every cut, which reads as noise between the orders -- not counted: "
+            "the floor is the level read above the response")
+
+
 def _fitted_stiffness(fit: OutputErrorFit) -> float:
     """The fitted shaft stiffness ``k`` (the natural frequency is ``sqrt(k)`` in model time);
     1 where the fit holds it, or where it is not a positive number."""
@@ -825,7 +855,7 @@ def diagnose_output_error(
     # an effect removes against the residual above the floor (read again from the final model)
     white = floor
     in_band = in_band_noise(base)
-    floor, unc = white * math.sqrt(in_band.variance_factor), _floor_uncertainty(in_band)
+    floor, unc, _ = _floor_with_band(base, white, in_band)
     say(f"starting model fitted: residual {base.rms / floor:.3g}x the noise floor")
     current, cur_model, added = base, tuple(model), []
     tried: list[Candidate] = []
@@ -1011,11 +1041,13 @@ def diagnose_output_error(
         current = _run_on(current, floor, notes)
     # the in-band noise again, from the model the search ended with (the one the verdict is on)
     in_band = in_band_noise(current)
-    floor, unc = white * math.sqrt(in_band.variance_factor), _floor_uncertainty(in_band)
-    if in_band.variance_factor > 1.0:
+    floor, unc, counted = _floor_with_band(current, white, in_band)
+    if counted:
         notes.append(_coloured_note(in_band, current))
         say(f"the probes' noise is coloured in the rotor's band: the floor {math.sqrt(in_band.variance_factor):.4g}x "
             "the level above the response")
+    elif in_band.variance_factor > 1.0:
+        notes.append(_misfit_between_orders_note(in_band, current, white))
     # one model for the whole record: is it the same rotor all through? (a crack that opens
     # above the critical barely lifts the residual, but the fit's scores drift at its onset)
     change = _constancy(current, floor, alpha)
