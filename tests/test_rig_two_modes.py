@@ -1,6 +1,7 @@
-"""A rig record through two modes (rotor_env.diagnosis.from_rig): the waveforms' model has one
-mode; where it does not explain the record and the 1X vectors add another, the waveforms are
-diagnosed without that mode's fitted 1X response, on the first mode's band.  Known truth:
+"""A rig record through two modes (rotor_env.diagnosis.from_rig): where the one-mode waveforms do
+not explain the record, a second mode in the waveforms' model (rotor_env.diagnosis.second_mode);
+where that is not taken and the 1X vectors add another mode, the waveforms are diagnosed without
+that mode's fitted 1X response, on the first mode's band.  Known truth:
 two modal responses simulated apart and added (a linear rotor with proportional damping is
 the sum of its modes)."""
 
@@ -132,13 +133,48 @@ def test_a_speed_band_is_one_stretch_of_the_record(two_modes):
         record.between_rpm(5000.0, 6000.0)
 
 
-def test_a_record_through_two_modes_is_explained_without_the_second(two_modes):
-    """The one-mode waveform model cannot hold the record; the vectors find the second mode
-    (criticals within 1 %); without its 1X, on the first mode's band (up to the geometric mean
-    of the criticals), the record is at the floor and the verdict names the second mode and no
-    fault.  A small library (two candidates) keeps the first, failing search short."""
+def test_a_record_through_two_modes_is_one_rotor_with_two_modes(two_modes):
+    """The one-mode waveform model cannot hold the record; with a second mode in the waveforms'
+    model (:mod:`rotor_env.diagnosis.second_mode`: the record is two independent modes, that
+    model exactly) the whole record is at the floor, the verdict names the second mode and no
+    fault, and the second mode's natural frequency (within 1 %) and damping ratio (within 10 %)
+    are the simulated one's, each inside its 95 % interval's reach; nothing is subtracted and
+    the whole run is fitted.  A small library (two candidates) keeps the first, failing search
+    short."""
     from rotor_env.diagnosis.from_rig import diagnose_rig
 
+    record, _, _ = two_modes
+    d = diagnose_rig(record, candidates=("asymmetry", "shaft_bow"))
+    out = d.to_dict()
+    assert out["verdict"] == "explained_after_adding" and out["missing"] == ["second_mode"], out["missing"]
+    assert out["rms_ratio_after"] < 1.1 and out["second_mode_subtracted"] is False
+    assert out["waveform_band_rpm"] is None and d.fitted is None
+    natural, c = MODES[1][0], MODES[1][1]
+    got = out["second_mode"]
+    assert got["natural_frequency_rpm"] == pytest.approx(natural, rel=0.01)
+    assert abs(got["natural_frequency_rpm"] - natural) < 2.0 * got["natural_frequency_rpm_ci95"] + 1.0
+    assert got["damping_ratio"] == pytest.approx(c / 2, rel=0.1)
+    assert got["one_mode_residual_over_floor"] > 2.0
+    assert "the waveforms' model holds a second mode of the rotor and its supports" in d.summary()
+
+
+def _no_modelled_mode(monkeypatch):
+    """The older reading, where the waveforms' second mode is not taken: without the vectors'
+    second mode's 1X, on the first mode's band."""
+    from rotor_env.diagnosis import from_rig
+
+    monkeypatch.setattr(from_rig, "_second_mode", lambda *a, **k: (None, "a second mode in the waveforms' model: "
+                                                                     "not tried (test)"))
+
+
+def test_a_record_through_two_modes_is_explained_without_the_second(two_modes, monkeypatch):
+    """Where the waveforms' own second mode is not taken: the vectors find the second mode
+    (criticals within 1 %); without its 1X, on the first mode's band (up to the geometric mean
+    of the criticals), the record is at the floor and the verdict names the second mode and no
+    fault."""
+    from rotor_env.diagnosis.from_rig import diagnose_rig
+
+    _no_modelled_mode(monkeypatch)
     record, _, _ = two_modes
     d = diagnose_rig(record, candidates=("asymmetry", "shaft_bow"))
     out = d.to_dict()
@@ -157,24 +193,29 @@ def test_a_record_through_two_modes_is_explained_without_the_second(two_modes):
     assert out["change"]["t_s"] >= float(d.fitted.t[0]) and out["change"]["rpm"] <= hi
 
 
-def test_two_modes_are_preferred_to_two_rotors(two_modes, monkeypatch):
+@pytest.mark.parametrize("modelled", [True, False])
+def test_two_modes_are_preferred_to_two_rotors(two_modes, monkeypatch, modelled):
     """A record the one-mode model explains only as two rotors either side of a break (here
-    the first diagnosis is made to say so: its parts explained), where the 1X vectors found
-    another mode, is diagnosed without that mode too; one constant rotor with two modes
-    explains it, and is taken, with a note saying what the first reading was."""
+    the first diagnosis is made to say so: its parts explained) is diagnosed with a second mode
+    in the waveforms' model -- or, where that is not taken, without the 1X vectors' other mode;
+    one constant rotor with two modes explains it, and is taken, with a note saying what the
+    first reading was."""
     from types import SimpleNamespace
 
     from rotor_env.diagnosis import from_rig
 
+    if not modelled:
+        _no_modelled_mode(monkeypatch)
     real = from_rig.RigDiagnosis.changed_parts
 
     def changed_parts(self):
         # the first, one-mode diagnosis: two rotors, each side explained
-        return SimpleNamespace(explained=True, appeared=[]) if not self.second_mode else real.fget(self)
+        two = self.second_mode or self.modelled_mode_from is not None
+        return SimpleNamespace(explained=True, appeared=[]) if not two else real.fget(self)
 
     monkeypatch.setattr(from_rig.RigDiagnosis, "changed_parts", property(changed_parts))
     record, _, _ = two_modes
     d = from_rig.diagnose_rig(record, candidates=("asymmetry",))
-    assert d.second_mode and d.missing == ["second_mode"], d.missing
+    assert (d.modelled_mode is not None if modelled else d.second_mode) and d.missing == ["second_mode"], d.missing
     assert d.diagnosis.rms_ratio_after < 1.05
     assert any("only as two rotors" in n for n in d.record.notes)

@@ -59,6 +59,8 @@ from pathlib import Path
 
 import numpy as np
 
+from identifier.hac import chi2_log10_sf
+
 from ..effects import EFFECTS
 from ..measurements.artefacts import remove_artefacts
 from ..measurements.drift import drift_knot_spacing, drift_note, probe_drift, remove_drift
@@ -67,13 +69,16 @@ from ..measurements.waveforms import LENGTH_UNIT, RigRecord, WaveformError
 from ..results import Result
 from .from_vectors import VectorDiagnosis, diagnose_vectors
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES
-from .oe_diagnosis import OutputErrorDiagnosis, diagnose_output_error
+from .oe_diagnosis import CONVERGE_ITERATIONS, OutputErrorDiagnosis, diagnose_output_error
 from .output_error import (
     TIME_UNIT_EFFECT,
+    OutputErrorFit,
     ShootingGrid,
+    fit_output_error,
     noise_ar1_two_channels,
     noise_std_high_band,
 )
+from .second_mode import SecondMode
 from .synchronous import RUNOUT, SECOND_MODE, extra_mode_vectors
 from .synchronous.fit import VectorFit, fit_vectors
 
@@ -92,6 +97,19 @@ NATURAL_FREQUENCY_AGREEMENT = 0.1
 #: not a forcing, and it is the time scale every output-error model holds
 ONE_X_ONLY = tuple(c for c in LIBRARY_CANDIDATES
                    if EFFECTS[c].orders == (1,) and c not in DEFAULT_MODEL and c != TIME_UNIT_EFFECT)
+#: a second mode in the waveforms' model is started at the 1X vectors' added modes and at these
+#: multiples of the top speed (a mode above the run: its 1X rises towards its critical; from
+#: either start a two-disk record's mode 30 % above the run was found within 0.1 %)
+SECOND_MODE_STARTS = (1.25, 2.0)
+#: ... and taken where it removes at least half the starting model's residual energy above the
+#: floor (a second mode is a structure of the rotor, not a small correction: what it takes
+#: of a one-mode record's misfit of a missing fault is a share the fault's own fit beats)
+SECOND_MODE_SHARE = 0.5
+#: a second mode lies at least this factor from the model's own (two-disk rotors: 1.3-2.5);
+#: closer, two criticals are one mode split (:func:`_not_a_second_mode`)
+SECOND_MODE_SEPARATION = 1.2
+#: ... and is damped by at least this ratio
+SECOND_MODE_MIN_DAMPING = 1e-3
 
 
 @dataclass
@@ -114,6 +132,34 @@ class RigDiagnosis(Result):
     #: the 1X fit whose added mode was taken away: the vectors' own, or the same model with
     #: the roles of its two modes exchanged (:func:`exchanged_modes`)
     mode_fit: VectorFit | None = None
+    #: the waveforms' model holds a second mode, fitted with the record (:mod:`.second_mode`;
+    #: the fit is the diagnosis's final one): one rotor with two modes explains the record
+    #: that the one-mode model did not (residual over floor of the one-mode diagnosis here)
+    modelled_mode_from: float | None = None
+
+    @property
+    def modelled_mode(self) -> SecondMode | None:
+        """The second mode the waveforms' model holds (first mode's time unit), else ``None``."""
+        if self.modelled_mode_from is None or not isinstance(self.diagnosis, OutputErrorDiagnosis):
+            return None
+        return self.diagnosis.after.second_mode
+
+    def second_mode_values(self) -> dict | None:
+        """The waveforms' second mode in engineering units, with 95 % intervals (HAC)."""
+        mode = self.modelled_mode
+        if mode is None:
+            return None
+        fit = self.diagnosis.after
+        rpm = self.w_ref / SPEED_UNITS["rpm"]
+        se = dict(zip(fit.names, fit.std_errors, strict=True))
+        se_k, se_c = se.get("second_mode.k", math.nan), se.get("second_mode.c", math.nan)
+        # delta method: f = sqrt(k), zeta = c / (2 sqrt(k))
+        se_zeta = math.hypot(se_c / (2 * mode.frequency), mode.c * se_k / (4 * mode.k * mode.frequency))
+        return {"natural_frequency_rpm": mode.frequency * rpm,
+                "natural_frequency_rpm_ci95": 1.96 * se_k / (2 * mode.frequency) * rpm,
+                "damping_ratio": mode.damping_ratio, "damping_ratio_ci95": 1.96 * se_zeta,
+                "modal_unbalance": abs(mode.u) * self.unit_scale, "unit": self.rms_unit,
+                "one_mode_residual_over_floor": self.modelled_mode_from}
 
     @property
     def modes(self) -> VectorFit:
@@ -153,6 +199,7 @@ class RigDiagnosis(Result):
             "criticals": vd["criticals"],
             "natural_frequency_rpm": self.w_ref / SPEED_UNITS["rpm"],
             "second_mode_subtracted": self.second_mode,
+            "second_mode": self.second_mode_values(),
             "waveform_band_rpm": list(self.band_rpm) if self.fitted is not None else None,
             "time_unit_s": 1.0 / self.w_ref,
             "vectors": {k: vd[k] for k in ("missing", "verdict", "rms_before", "rms_after", "noise_floor",
@@ -178,7 +225,7 @@ class RigDiagnosis(Result):
                  f"VERDICT: {self.verdict}" + (f" -- missing: {', '.join(self.missing)}" if self.missing else "")
                  + " (one conclusion for the record: the waveforms' model holds every sample; the 1X "
                  "vectors below are a part of it)"]
-        if self.second_mode:
+        if self.second_mode or self.modelled_mode is not None:
             lines.append(self.band_sentence)
         change = self.change_when
         if change is not None:
@@ -258,6 +305,11 @@ class RigDiagnosis(Result):
         if self.changed_parts is not None or d.not_throughout:
             # two rotors in one record: the vectors' one model reads neither (what the
             # waveforms' one model named for the change, the vectors' would name for it too)
+            return []
+        if self.modelled_mode is not None:
+            # the waveforms' model holds a second mode: its 1X is in the vectors too, and
+            # their model, which lacks it, reads it as what it has (a two-disk record's mode
+            # above the run: a shaft bow to the 1X fit)
             return []
         lib = library_effects()
         refuted = self.refuted_by_waveforms
@@ -374,12 +426,21 @@ class RigDiagnosis(Result):
         parts = self.changed_parts
         appeared = [e for e in parts.appeared if e not in self.diagnosis.missing] if parts is not None else []
         # the second mode the 1X vectors found, which the waveforms' model does not have
-        second = [SECOND_MODE] if self.second_mode else []
+        second = [SECOND_MODE] if self.second_mode or self.modelled_mode is not None else []
         return [*self.diagnosis.missing, *appeared, *self.named_by_vectors, *second]
 
     @property
     def band_sentence(self) -> str:
         """What the waveforms were fitted to, where the record holds a second mode."""
+        modelled = self.second_mode_values()
+        if modelled is not None:
+            return (f"the waveforms' model holds a second mode of the rotor and its supports, fitted with the record: "
+                    f"natural frequency {modelled['natural_frequency_rpm']:.0f} +- "
+                    f"{modelled['natural_frequency_rpm_ci95']:.0f} rpm, damping ratio {modelled['damping_ratio']:.4f} "
+                    f"+- {modelled['damping_ratio_ci95']:.4f}, modal unbalance {modelled['modal_unbalance']:.3g} "
+                    f"{modelled['unit']} (the one-mode model left the waveforms at "
+                    f"{modelled['one_mode_residual_over_floor']:.3g}x the floor); the library's effects act on the "
+                    "first mode")
         if not self.second_mode:
             return ""
         fit = self.modes
@@ -401,7 +462,8 @@ class RigDiagnosis(Result):
         if parts is not None and parts.explained and v in ("partly_explained", "unexplained"):
             # one model per side explains what one model for the record could not
             return "explained_after_adding"
-        return "explained_after_adding" if v == "explained" and (self.named_by_vectors or self.second_mode) else v
+        two = self.second_mode or self.modelled_mode is not None
+        return "explained_after_adding" if v == "explained" and (self.named_by_vectors or two) else v
 
 
 def diagnose_rig(
@@ -458,13 +520,38 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
     unit_scale = (LENGTH_UNIT / record.rig.to_metres(1.0)) if record.rig.model == "translation" else 1e6
     unit = record.rig.amp_unit if record.rig.model == "translation" else "urad"
 
-    def waveforms(rec: RigRecord, w: float = w_ref, tried: Sequence[str] = cands) -> OutputErrorDiagnosis:
+    def waveforms(rec: RigRecord, w: float = w_ref, tried: Sequence[str] = cands,
+                  mode: SecondMode | None = None) -> OutputErrorDiagnosis:
         grid, _ = waveform_grid(rec, w)
-        return diagnose_output_error(grid, list(model), list(tried), alpha=alpha, unit_scale=unit_scale, unit=unit,
-                                     progress=progress)
+        return diagnose_output_error(replace(grid, second_mode=mode), list(model), list(tried), alpha=alpha,
+                                     unit_scale=unit_scale, unit=unit, progress=progress)
 
     plain = RigDiagnosis(record, vd, waveforms(record), w_ref)
     explained = plain.verdict in ("explained", "explained_after_adding")
+    if (not explained or plain.changed_parts is not None) and isinstance(plain.diagnosis, OutputErrorDiagnosis):
+        # one mode does not explain the record, or only as two rotors either side of a break: a
+        # second mode in the waveforms' model, fitted with the record (module docstring), taken
+        # where it explains the record as one rotor -- the simpler reading
+        step("waveforms: a second mode in the waveforms' model")
+        found, said = _second_mode(plain.diagnosis, vd.after, w_ref, alpha)
+        if found is not None:
+            # the library's effects act on the model's own mode, and which of the two a fault
+            # shows in is not known: the roles as found, then exchanged
+            ends = []
+            for w, mode in _mode_roles(found, w_ref):
+                two = waveforms(record, w, mode=mode)
+                one_rotor = getattr(two, "parts", None) is None or not two.parts.changed
+                if (two.verdict in ("explained", "explained_after_adding") and one_rotor
+                        and two.rms_ratio_after < plain.diagnosis.rms_ratio_after):
+                    if explained:
+                        record = replace(record, notes=(*record.notes, (
+                            "the one-mode waveforms explained this record only as two rotors, either side of a "
+                            "break; with a second mode in the waveforms' model, one rotor explains it")))
+                    return RigDiagnosis(record, vd, two, w, modelled_mode_from=plain.diagnosis.rms_ratio_after)
+                ends.append(f"{two.verdict.replace('_', ' ')} at {two.rms_ratio_after:.3g}x the floor")
+            said = f"{said}; with it the diagnosis ends {' and, the two modes exchanged, '.join(ends)}: not taken"
+        record = replace(record, notes=(*record.notes, said))
+        plain = replace(plain, record=record)
     if SECOND_MODE not in vd.missing or (explained and plain.changed_parts is None):
         return plain
     if explained and vd.verdict not in ("explained", "explained_after_adding"):
@@ -550,6 +637,84 @@ def check_by_waveforms(rd: RigDiagnosis, alpha: float = 0.05) -> RigDiagnosis:
         checks[e] = {"log10_p": lp, "q": q, "level": level, "significant": bool(lp < level),
                      "values": f.parameters(e), "vectors": dict(values.get(e, {}))}
     return replace(rd, vector_checks=checks) if checks else rd
+
+
+def _second_mode(d: OutputErrorDiagnosis, vectors: VectorFit, w_ref: float,
+                 alpha: float) -> tuple[OutputErrorFit | None, str]:
+    """The starting model's fit with the second mode that fits the record best (``None`` where
+    none is taken), and what was found: started
+    at the 1X vectors' added modes and at 1.25 and 2 times the top speed (a mode above the
+    run, whose 1X rises towards its critical), each fitted with the starting model; taken
+    where its modal unbalance's HAC Wald test is significant at ``alpha`` and it takes at least
+    :data:`SECOND_MODE_SHARE` of the residual energy above the floor."""
+    base = d.before
+    grid = base.grid
+    top = float(np.max(np.abs(grid.phid)))
+    starts = [SecondMode.from_frequency(w / w_ref, max(0.5 * c, 0.005)) for w, c in vectors.extra_modes]
+    starts += [SecondMode.from_frequency(f * top, 0.02) for f in SECOND_MODE_STARTS]
+    best: OutputErrorFit | None = None
+    odd: list[str] = []
+    for start in starts:
+        try:
+            f = fit_output_error(replace(grid, second_mode=start), base.effects, previous=base,
+                                 max_iter=CONVERGE_ITERATIONS)
+        except (FloatingPointError, np.linalg.LinAlgError, ValueError):
+            continue
+        why = _not_a_second_mode(f)
+        if why:
+            odd.append(why)
+        elif best is None or f.rss < best.rss:
+            best = f
+    if best is None:
+        return None, ("a second mode in the waveforms' model: " + ("; ".join(dict.fromkeys(odd)) if odd else
+                                                                  "no fit converged") + ": not taken")
+    mode = best.second_mode
+    rpm = mode.frequency * w_ref / SPEED_UNITS["rpm"]
+    idx = [best.names.index(f"second_mode.{n}") for n in ("u_cos", "u_sin")]
+    u = best.values[idx]
+    try:
+        wald = float(u @ np.linalg.solve(best.covariance[np.ix_(idx, idx)], u))
+    except np.linalg.LinAlgError:
+        wald = 0.0
+    log10_p = chi2_log10_sf(wald, 2)
+    noise = d.noise_floor ** 2 * base.n_rows
+    share = (base.rss - best.rss) / max(base.rss - noise, 1e-300)
+    what = (f"a second mode in the waveforms' model fits best at {rpm:.0f} rpm (damping ratio "
+            f"{mode.damping_ratio:.4f}): the starting model's residual {base.rms / d.noise_floor:.3g}x -> "
+            f"{best.rms / d.noise_floor:.3g}x the floor, its modal unbalance's log10 p = {log10_p:.3g}")
+    if log10_p >= math.log10(alpha) or share < SECOND_MODE_SHARE:
+        return None, f"{what}: not significant, or it takes {share:.1%} of the residual above the floor only"
+    return best, what
+
+
+def _not_a_second_mode(fit: OutputErrorFit) -> str:
+    """Why a fitted second mode is not one (``""`` where it is): within
+    :data:`SECOND_MODE_SEPARATION` of the model's own mode -- the split of one mode into two
+    criticals by a shaft asymmetry or a support anisotropy, which the library holds, and which
+    a second isotropic mode mimics (an open crack's record, offered no candidate, took a
+    "mode" 5.6 % above the first, undamped) -- or damped by less than
+    :data:`SECOND_MODE_MIN_DAMPING` (no structure rings for ever)."""
+    mode = fit.second_mode
+    ratio = mode.frequency / math.sqrt(max(fit.value(f"{TIME_UNIT_EFFECT}.k"), 1e-12))
+    if 1.0 / SECOND_MODE_SEPARATION < ratio < SECOND_MODE_SEPARATION:
+        return (f"it fits at {ratio:.3g} times the model's own natural frequency, the split of one mode into two "
+                "criticals (a shaft asymmetry or a support anisotropy), not a second mode")
+    if mode.damping_ratio < SECOND_MODE_MIN_DAMPING:
+        return f"it fits with a damping ratio of {mode.damping_ratio:.2g}: no structure of a rotor rings undamped"
+    return ""
+
+
+def _mode_roles(fit: OutputErrorFit, w_ref: float) -> list[tuple[float, SecondMode]]:
+    """The two readings of a fit with a second mode: the time scale ``w_ref`` (rad/s) with the
+    fitted second mode, and the time scale at the second mode with the model's own mode as the
+    second (its stiffness and damping in that time unit: ``k1 / f^2``, ``c1 / f``; its modal
+    unbalance found by the fit, which is linear in it)."""
+    mode = fit.second_mode
+    f = mode.frequency
+    k1 = fit.value(f"{TIME_UNIT_EFFECT}.k")
+    c1 = fit.value("viscous_damping.c") if "viscous_damping.c" in fit.names else 2.0 * 0.02 * math.sqrt(k1)
+    own = SecondMode(k1 / (f * f), max(c1, 0.0) / f)
+    return [(w_ref, mode), (w_ref * f, own)]
 
 
 def _without_second_mode(record: RigRecord, fit: VectorFit) -> tuple[RigRecord, tuple[float, float] | None]:

@@ -848,6 +848,10 @@ def diagnose_output_error(
     step("waveforms: output-error fit of the starting model")
 
     start = equation_error_start(grid, model)
+    if grid.second_mode is not None and TIME_UNIT_EFFECT in start:
+        # with a second mode the model's own is started at the time scale: the equation error
+        # of one mode on two modes' record puts its stiffness anywhere between the two
+        start[TIME_UNIT_EFFECT] = np.ones_like(start[TIME_UNIT_EFFECT])
     base = fit_output_error(grid, model, start)
     # the probes' noise in the rotor's band, read off the starting model's residual between
     # the shaft's orders (a misfit at them stays out of the bins read): 1/f noise lifts it

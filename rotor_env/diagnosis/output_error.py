@@ -79,6 +79,14 @@ from numba import njit, prange
 from identifier.hac import andrews_bandwidth, chi2_log10_sf, long_run_covariance
 
 from ..effects import EFFECTS, Effect
+from .second_mode import (
+    MODE_PARAMETERS,
+    N_MODE_PARAMETERS,
+    N_MODE_STATES,
+    SecondMode,
+    shoot_second_mode,
+    substeps,
+)
 
 __all__ = [
     "AddedEffectInformation",
@@ -503,6 +511,9 @@ class ShootingGrid:
     #: the noise's lag-one correlation at the rate of the record the grid was decimated from
     #: (AR(1); 0: white): the shape of :meth:`noise_density`
     noise_rho: float = 0.0
+    #: a second mode of the rotor every fit on this grid holds (:mod:`.second_mode`), started
+    #: here where the fit has no ``previous`` with one; ``None``: the one-mode model
+    second_mode: SecondMode | None = None
 
     @classmethod
     def from_arrays(cls, t, phi, phid, th_x, th_y, ip: float, *, noise_std: float | None = None,
@@ -649,8 +660,18 @@ class ShootingGrid:
         return var * 2.0 * dt * np.interp(w_in, w, shape) / mean
 
     def start_states(self) -> np.ndarray:
+        """The segments' first start states: the first mode's from the measured tilts and their
+        estimated rates; with a second mode its steady 1X state first (``(S, 8)``)."""
         i = self.segments[:, 0]
-        return np.column_stack([self.y[i, 0], self.y[i, 1], self.rates[i, 0], self.rates[i, 1]])
+        own = np.column_stack([self.y[i, 0], self.y[i, 1], self.rates[i, 0], self.rates[i, 1]])
+        if self.second_mode is None:
+            return own
+        return np.column_stack([self.second_mode.steady_states(self.phi[i], self.phid[i]), own])
+
+    @property
+    def n_states(self) -> int:
+        """Start-state parameters per segment: the first mode's four, and the second mode's."""
+        return 4 + (N_MODE_STATES if self.second_mode is not None else 0)
 
 
 # ------------------------------------------------------------------ the fit
@@ -681,6 +702,14 @@ class OutputErrorFit:
     #: reached in the steps left (its last step's fall for each, :data:`GIVE_UP_MARGIN` times);
     #: ``None`` where it ran to convergence or to ``max_iter``
     reachable: float | None = None
+    #: the second mode's parameters (:data:`~.second_mode.MODE_PARAMETERS`) where the grid holds
+    #: one (:attr:`ShootingGrid.second_mode`)
+    mode2: np.ndarray | None = field(repr=False, default=None)
+
+    @property
+    def second_mode(self) -> SecondMode | None:
+        """The fitted second mode, ``None`` in a one-mode model."""
+        return None if self.mode2 is None else SecondMode.from_array(self.mode2)
 
     @property
     def gave_up(self) -> bool:
@@ -796,21 +825,32 @@ def _baseline_fit(grid, r: np.ndarray) -> np.ndarray:
     return B @ cho_solve(G, B.T @ r)
 
 
-def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, midx=None):
+def _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, midx=None, mode2=None):
     """Predictions and Jacobian columns: the free coefficients (``pidx``), arguments, the
-    output terms (:data:`OUTPUT_TERMS`), then the segment's start state; the moment is that
-    of the coefficients ``midx`` (default: the free ones)."""
+    output terms (:data:`OUTPUT_TERMS`), with a second mode (``mode2``) its parameters and
+    start state, then the segment's start state; the moment is that of the coefficients
+    ``midx`` (default: the free ones).  ``x0``: the segments' start states (the second mode's
+    first where there is one)."""
     midx = pidx if midx is None else midx
     npar = len(pidx) + len(qidx)
-    nf = npar + N_OFFSETS + 4
+    n2 = N_MODE_PARAMETERS + N_MODE_STATES if mode2 is not None else 0
+    nf = npar + N_OFFSETS + n2 + 4
     # rows outside the segments (a fit on a subset of them) predict the measurement itself:
     # no residual, no gradient
     pred = grid.y.copy()
     jac = np.zeros((grid.n, 2, nf))
     # the kernel leaves the offsets' columns at zero (no state depends on them)
-    status = kernel.module.shoot(grid.t, grid.phi, grid.phid, grid.segments, x0, theta, arg, active,
-                                 pidx, midx, qidx, qlo, qhi, grid.ip, grid.substeps, pred, jac)
+    status = kernel.module.shoot(grid.t, grid.phi, grid.phid, grid.segments, np.ascontiguousarray(x0[:, -4:]), theta,
+                                 arg, active, pidx, midx, qidx, qlo, qhi, grid.ip, grid.substeps, pred, jac)
     rows = grid.rows
+    if mode2 is not None and status == 0:
+        # the second mode's orbit adds to the first's (both are what the probes read)
+        other = np.zeros((grid.n, 2))
+        dt = float(np.max(np.diff(grid.t))) if grid.n > 1 else 1.0
+        nsub = substeps(SecondMode.from_array(mode2), dt, grid.substeps)
+        shoot_second_mode(grid.t, grid.phi, grid.phid, grid.segments, x0[:, :N_MODE_STATES], mode2, nsub, other, jac,
+                          npar + N_OFFSETS)
+        pred[rows] += other[rows]
     # the probes' calibration first (it acts on the rotor's orbit, not on the track's runout):
     # z + eps conj(z) with z = th_y + i th_x, eps = a + i b -- th_y += a th_y + b th_x,
     # th_x += b th_y - a th_x; every column of the orbit's Jacobian the same way
@@ -864,10 +904,11 @@ def _reduced_normal_equations(r, jac, seg, npq):
     matrix product ``[J r]'[J r]`` (BLAS: twice as fast as the sums written out)."""
     ns = seg.shape[0]
     nf = jac.shape[2]
+    nx = nf - npq
     Hs = np.zeros((ns, npq, npq))
     gs = np.zeros((ns, npq))
-    GiC = np.zeros((ns, 4, npq))
-    Gic = np.zeros((ns, 4))
+    GiC = np.zeros((ns, nx, npq))
+    Gic = np.zeros((ns, nx))
     for s in prange(ns):
         A = _segment_rows(r, jac, seg[s, 0], seg[s, 1] + 1)
         M = A.T @ A
@@ -1016,22 +1057,30 @@ def fit_output_error(
         raise ValueError(f"held effects {unknown} are not in the model {effects}")
     pidx, qidx, qlo, qhi, names, owners = _free_layout(kernel, effects, fixed_args, held)
     midx = _moment_layout(kernel, effects)
-    npq = len(pidx) + len(qidx) + N_OFFSETS
-    names = (*names, *(f"output.{n}" for n in OUTPUT_TERMS))
-    owners = (*owners, *("output",) * N_OFFSETS)
-    x0 = grid.start_states() if x0 is None else np.array(x0, float)
+    # the second mode where the grid holds one: from a previous fit that has it, else the grid's start
+    mode2 = None
+    if grid.second_mode is not None:
+        mode2 = (previous.mode2.copy() if previous is not None and previous.mode2 is not None
+                 else grid.second_mode.as_array())
+    n_mode = N_MODE_PARAMETERS if mode2 is not None else 0
+    npq = len(pidx) + len(qidx) + N_OFFSETS + n_mode
+    names = (*names, *(f"output.{n}" for n in OUTPUT_TERMS), *(f"second_mode.{n}" for n in MODE_PARAMETERS[:n_mode]))
+    owners = (*owners, *("output",) * N_OFFSETS, *("second_mode",) * n_mode)
+    x0 = _start_states_for(grid, x0)
     offset = previous.offset.copy() if previous is not None else np.zeros(N_OFFSETS)
+    n_free = len(pidx) + len(qidx)
 
     def pack():
-        return np.concatenate([theta[pidx], arg[qidx], offset])
+        return np.concatenate([theta[pidx], arg[qidx], offset, *(() if mode2 is None else (mode2,))])
 
     def unpack(v):
         th, ar = theta.copy(), arg.copy()
         th[pidx] = v[:len(pidx)]
-        ar[qidx] = v[len(pidx):len(pidx) + len(qidx)]
-        return th, ar, v[len(pidx) + len(qidx):].copy()
+        ar[qidx] = v[len(pidx):n_free]
+        m2 = None if mode2 is None else v[n_free + N_OFFSETS:].copy()
+        return th, ar, v[n_free:n_free + N_OFFSETS].copy(), m2
 
-    status, pred, jac = _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, midx)
+    status, pred, jac = _shoot(kernel, grid, x0, theta, arg, active, pidx, qidx, qlo, qhi, offset, midx, mode2)
     if status:
         raise FloatingPointError("the model diverged from its start values")
     r = grid.y - pred
@@ -1056,10 +1105,13 @@ def fit_output_error(
                 lam *= 10
                 continue
             v_new = v + d
-            th_new, ar_new, off_new = unpack(v_new)
+            th_new, ar_new, off_new, m2_new = unpack(v_new)
             x0_new = x0 + Gic - GiC @ d
+            if m2_new is not None and not (m2_new[0] > 0 and m2_new[1] >= 0):
+                lam *= 8.0  # a second mode with no stiffness or negative damping is no mode
+                continue
             st, p_new, j_new = _shoot(kernel, grid, x0_new, th_new, ar_new, active, pidx, qidx, qlo, qhi, off_new,
-                                      midx)
+                                      midx, m2_new)
             r_new = grid.y - p_new
             with np.errstate(over="ignore", invalid="ignore"):  # a trial step that blew up is refused
                 rss_new = float(np.sum(r_new * r_new)) if st == 0 else math.inf
@@ -1069,7 +1121,7 @@ def fit_output_error(
                 improved = True
                 fall = rss - rss_new
                 drop = fall / max(rss, 1e-300)
-                v, theta, arg, offset, x0 = v_new, th_new, ar_new, off_new, x0_new
+                v, theta, arg, offset, x0, mode2 = v_new, th_new, ar_new, off_new, x0_new, m2_new
                 pred, jac, r, rss = p_new, j_new, r_new, rss_new
                 lam = max(lam / 5.0, 1e-9)
                 break
@@ -1091,7 +1143,23 @@ def fit_output_error(
     S = long_run_covariance(scores, bw)
     cov = bread @ S @ bread
     return OutputErrorFit(effects, names, owners, v.copy(), cov, rss, r, pred, x0, it, converged, bw, grid,
-                          theta, arg, offset, reachable)
+                          theta, arg, offset, reachable, mode2)
+
+
+def _start_states_for(grid: ShootingGrid, x0: np.ndarray | None) -> np.ndarray:
+    """``x0`` (a previous fit's, or ``None``: the grid's first guesses) with the columns the
+    grid's model has: the second mode's steady state put first where ``x0`` lacks it, dropped
+    where the grid has none."""
+    if x0 is None:
+        return grid.start_states()
+    x0 = np.array(x0, float)
+    if x0.shape[1] == grid.n_states:
+        return x0
+    own = x0[:, -4:]
+    if grid.second_mode is None:
+        return own
+    i = grid.segments[:, 0]
+    return np.column_stack([grid.second_mode.steady_states(grid.phi[i], grid.phid[i]), own])
 
 
 @dataclass(frozen=True)
@@ -1179,11 +1247,14 @@ def _jacobian_along(fit: OutputErrorFit, effects: Sequence[str], theta: np.ndarr
         active[lib.index(e)] = True
     pidx, qidx, qlo, qhi, names, owners = _free_layout(kernel, effects, fixed)
     npar = len(pidx) + len(qidx)
-    status, pred, jac = _shoot(kernel, fit.grid, fit.x0, theta, arg, active, pidx, qidx, qlo, qhi, fit.offset)
+    status, pred, jac = _shoot(kernel, fit.grid, fit.x0, theta, arg, active, pidx, qidx, qlo, qhi, fit.offset,
+                               mode2=fit.mode2)
     if status:
         raise FloatingPointError("the fitted model diverged on its own record")
-    names = (*names, *(f"output.{n}" for n in OUTPUT_TERMS))
-    return names, (*owners, *("output",) * N_OFFSETS), npar, npar + N_OFFSETS, pred, jac
+    n_mode = 0 if fit.mode2 is None else N_MODE_PARAMETERS
+    names = (*names, *(f"output.{n}" for n in OUTPUT_TERMS), *(f"second_mode.{n}" for n in MODE_PARAMETERS[:n_mode]))
+    owners = (*owners, *("output",) * N_OFFSETS, *("second_mode",) * n_mode)
+    return names, owners, npar, npar + N_OFFSETS + n_mode, pred, jac
 
 
 def added_effect_information(fit: OutputErrorFit, effect: str,
@@ -1217,7 +1288,9 @@ def added_effect_information(fit: OutputErrorFit, effect: str,
     for i, o in enumerate(owners[:npar]):
         if o != effect:
             groups.setdefault(o, []).append(i)
-    groups["the probes' offsets and runout"] = list(range(npar, npq))
+    groups["the probes' offsets and runout"] = list(range(npar, npar + N_OFFSETS))
+    if npq > npar + N_OFFSETS:
+        groups["the second mode"] = list(range(npar + N_OFFSETS, npq))
     rest = [i for i in range(npq) if i not in mine]
     raw = np.vstack([jac[i0:i1 + 1, :, :npq].reshape(-1, npq) for i0, i1 in grid.segments])
     rt, Jt = _project(grid, r, jac, npq)
