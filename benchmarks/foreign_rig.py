@@ -699,10 +699,23 @@ def estimates(case: str, truth: dict, params: dict) -> dict:
     return out
 
 
+def second_mode_estimate(truth: dict, d: dict) -> dict:
+    """The second mode the waveforms' model holds (``d["second_mode"]``) beside the two-disk
+    rotor's, where the diagnosis reports one."""
+    got = d.get("second_mode")
+    if not got or "second_critical_rpm" not in truth:
+        return {}
+    return {"second_mode": {"rpm": got["natural_frequency_rpm"], "rpm_ci95": got["natural_frequency_rpm_ci95"],
+                            "zeta": got["damping_ratio"], "true_rpm": truth["second_critical_rpm"]}}
+
+
 def _estimate_cell(o: dict) -> str:
     parts = []
     for name, v in (o.get("estimates") or {}).items():
-        if name == "unbalance":
+        if name == "second_mode":
+            parts.append(f"second mode {v['rpm']:.0f} +- {v['rpm_ci95']:.0f}/{v['true_rpm']:.0f} rpm, "
+                         f"zeta {v['zeta']:.4f}")
+        elif name == "unbalance":
             parts.append(f"e {v['e_um']:.2f}/{v['true_e_um']:.2f} um, heavy spot "
                          f"{v['heavy_spot_deg']:.0f}/{v['true_heavy_spot_deg']:.0f} deg")
         elif name == "rub":
@@ -751,7 +764,7 @@ def judge(case: str, truth: dict, d: dict, true_noise: float) -> dict:
             "rms_ratio_before": d.get("rms_ratio_before"), "rms_ratio_after": d.get("rms_ratio_after"),
             "right": bool(right), "missed": bool(missed), "wrong_named": extra,
             "said_undecidable": bool(missed) and any(e in undecidable for e in expected),
-            "estimates": estimates(case, truth, params),
+            "estimates": {**estimates(case, truth, params), **second_mode_estimate(truth, d)},
             "crack_named_falsely": case not in CRACK_CASES and any(c in named for c in CRACKS),
             "crack": crack_comparison(case, truth, params), "parameters": params,
             "rejected": d.get("rejected"), "undecidable": d.get("undecidable"), "notes": d.get("notes")}

@@ -47,6 +47,14 @@ itself; ``A`` and ``B`` for an argument are forward differences of the *column f
 at the current state (exact for the linear effects, whose columns are linear in ``x``),
 never differences of whole runs.
 
+A second mode
+-------------
+Where the grid holds one (:attr:`ShootingGrid.second_mode`, :mod:`.second_mode`) every fit on it
+predicts the first mode's orbit plus a second isotropic oscillator's, forced by the unbalance
+through its own modal unbalance: four more parameters (its stiffness, damping and the modal
+unbalance's two parts, after the output terms) and four more start-state columns per segment
+(before the first mode's, projected out with them).
+
 Uncertainty
 -----------
 ``Cov(theta) = (J'J)^-1 S (J'J)^-1`` with ``J`` the projected Jacobian and ``S`` the
