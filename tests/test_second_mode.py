@@ -189,3 +189,25 @@ def test_a_missing_crack_is_not_taken_for_a_second_mode(tmp_path):
     assert d["verdict"] in ("unexplained", "partly_explained") and d["missing"] == [], (d["verdict"], d["missing"])
     assert d["second_mode"] is None
     assert any(n.startswith("a second mode in the waveforms' model") for n in d["notes"]), d["notes"]
+
+
+@pytest.mark.parametrize(("frequency", "zeta", "reason"), [
+    (1.1, 0.02, "split of one mode"),      # 1.1x the model's own: an asymmetry's two criticals
+    (0.85, 0.02, "split of one mode"),
+    (2.0, 1e-5, "rings undamped"),
+    (2.0, 0.26, "filter of the noise"),    # a 1/f record read as white fitted one so
+    (0.3, 0.05, "below the run"),          # the run from 0.4: a mode's 1X there is a constant
+    (2.0, 0.02, ""),                       # a second mode
+    (0.6, 0.02, ""),                       # ... below the model's own, in the run
+])
+def test_what_is_not_a_second_mode(frequency, zeta, reason):
+    """The rules a fitted second mode must pass (``from_rig._not_a_second_mode``), each with the
+    record that taught it (PHYSICS.md section 9)."""
+    from types import SimpleNamespace
+
+    from rotor_env.diagnosis.from_rig import _not_a_second_mode
+
+    fit = SimpleNamespace(second_mode=SecondMode.from_frequency(frequency, zeta), value=lambda name: 1.0,
+                          grid=SimpleNamespace(phid=np.linspace(0.4, 1.8, 50)))
+    why = _not_a_second_mode(fit)
+    assert (reason in why) if reason else why == "", why

@@ -104,7 +104,13 @@ NATURAL_FREQUENCY_AGREEMENT = 0.1
 #: not a forcing, and it is the time scale every output-error model holds
 ONE_X_ONLY = tuple(c for c in LIBRARY_CANDIDATES
                    if EFFECTS[c].orders == (1,) and c not in DEFAULT_MODEL and c != TIME_UNIT_EFFECT)
-#: a second mode in the waveforms' model is started at the 1X vectors' added modes and at these
+#: a second mode in the waveforms' model is tried only where the one-mode model leaves the record
+#: at least this far above the floor: a second mode is a structure, and it misses by many times
+#: (two-disk records 2.6-60x); a record just over the verdict's 1.1 has too little misfit to
+#: tell a mode from what its free ring takes of the noise (1/f records at 1.10-1.12 fitted
+#: "modes" 1.1-1.17x the first)
+SECOND_MODE_MIN_RATIO = 1.5
+#: it is started at the 1X vectors' added modes and at these
 #: multiples of the top speed (a mode above the run: its 1X rises towards its critical; from
 #: either start a two-disk record's mode 30 % above the run was found within 0.1 %)
 SECOND_MODE_STARTS = (1.25, 2.0)
@@ -546,7 +552,8 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
 
     plain = RigDiagnosis(record, vd, waveforms(record), w_ref)
     explained = plain.verdict in ("explained", "explained_after_adding")
-    if (not explained or plain.changed_parts is not None) and isinstance(plain.diagnosis, OutputErrorDiagnosis):
+    if ((not explained or plain.changed_parts is not None) and isinstance(plain.diagnosis, OutputErrorDiagnosis)
+            and plain.diagnosis.rms_ratio_after >= SECOND_MODE_MIN_RATIO):
         # one mode does not explain the record, or only as two rotors either side of a break: a
         # second mode in the waveforms' model, fitted with the record (module docstring), taken
         # where it explains the record as one rotor -- the simpler reading
