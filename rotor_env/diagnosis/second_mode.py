@@ -49,6 +49,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from .spin import spin_between
+
 __all__ = ["MODE_PARAMETERS", "N_MODE_PARAMETERS", "N_MODE_STATES", "SecondMode", "shoot_second_mode"]
 
 #: the second mode's parameters, in the fit's layout: stiffness and damping (first mode's
@@ -170,14 +172,10 @@ def _shoot_range(s0, s1, t, phi, phid, seg, states, k, c, u, nsub, pred, jac, co
             a = (phid[i + 1] - phid[i]) / dts
             h = dts / nsub
             for m in range(nsub):
-                tau = m * h
-                p0 = phi[i] + phid[i] * tau + 0.5 * a * tau * tau
-                w0 = phid[i] + a * tau
+                p0, w0 = spin_between(phi[i], phid[i], a, m * h)
+                pm, wm = spin_between(p0, w0, a, 0.5 * h)
+                pe, we = spin_between(p0, w0, a, h)
                 hh = 0.5 * h
-                pm = p0 + w0 * hh + 0.5 * a * hh * hh
-                wm = w0 + a * hh
-                pe = p0 + w0 * h + 0.5 * a * h * h
-                we = w0 + a * h
                 F0 = _force(p0, w0, a)
                 Fm = _force(pm, wm, a)
                 Fe = _force(pe, we, a)
