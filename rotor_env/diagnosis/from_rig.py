@@ -66,8 +66,6 @@ from pathlib import Path
 
 import numpy as np
 
-from identifier.hac import chi2_log10_sf
-
 from ..effects import EFFECTS
 from ..measurements.artefacts import remove_artefacts
 from ..measurements.drift import drift_knot_spacing, drift_note, probe_drift, remove_drift
@@ -715,13 +713,9 @@ def _second_mode(d: OutputErrorDiagnosis, vectors: VectorFit, w_ref: float,
                                                                   "no fit converged") + ": not taken")
     mode = best.second_mode
     rpm = mode.frequency * w_ref / SPEED_UNITS["rpm"]
-    idx = [best.names.index(f"second_mode.{n}") for n in ("u_cos", "u_sin")]
-    u = best.values[idx]
-    try:
-        wald = float(u @ np.linalg.solve(best.covariance[np.ix_(idx, idx)], u))
-    except np.linalg.LinAlgError:
-        wald = 0.0
-    log10_p = chi2_log10_sf(wald, 2)
+    wald, _, log10_p = best.wald_of(["second_mode.u_cos", "second_mode.u_sin"])
+    if not math.isfinite(wald):
+        log10_p = 0.0  # a singular covariance says nothing: not significant
     noise = d.noise_floor ** 2 * base.n_rows
     share = (base.rss - best.rss) / max(base.rss - noise, 1e-300)
     which = "starting model" if base is d.before else "model the one-mode search ended with"

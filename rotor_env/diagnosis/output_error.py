@@ -777,8 +777,14 @@ class OutputErrorFit:
     def wald(self, effect: str, null: Mapping[str, float] | None = None) -> tuple[float, int, float]:
         """HAC Wald test that the effect's coefficients equal ``null`` (by full name,
         ``"effect.coefficient"``; zero where ``None``): ``(W, q, log10 p)``."""
-        idx = [i for i, (o, nm) in enumerate(zip(self.owners, self.names, strict=True))
-               if o == effect and nm.split(".", 1)[1] in EFFECTS[effect].coefficients]
+        names = [nm for o, nm in zip(self.owners, self.names, strict=True)
+                 if o == effect and nm.split(".", 1)[1] in EFFECTS[effect].coefficients]
+        return self.wald_of(names, null)
+
+    def wald_of(self, names: Sequence[str], null: Mapping[str, float] | None = None) -> tuple[float, int, float]:
+        """HAC Wald test that the free parameters ``names`` equal ``null`` (zero where ``None``):
+        ``(W, q, log10 p)``; ``W`` infinite where their covariance is singular."""
+        idx = [self.names.index(nm) for nm in names]
         th = self.values[idx]
         if null is not None:
             th = th - np.array([null[self.names[i]] for i in idx])
