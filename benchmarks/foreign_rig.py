@@ -411,20 +411,46 @@ def _start_state(r: Rotor, t_start: float) -> list[float]:
     return [z.real, z.imag, v.real, v.imag]
 
 
+class SimulatorUnstable(RuntimeError):
+    """The drawn rotor's own motion diverged (not a product error: said apart in the table)."""
+
+
+#: an orbit this many times the drawn steady peak (or the healthy record's) has left any rig
+UNSTABLE_PEAK_FACTOR = 20.0
+
+
 def integrate(r: Rotor, t: np.ndarray) -> np.ndarray:
-    """Disk centre ``(x, y)`` in metres at the times ``t`` (>= 0), shape ``(2, len(t))``."""
+    """Disk centre ``(x, y)`` in metres at the times ``t`` (>= 0), shape ``(2, len(t))``.
+
+    Raises :class:`SimulatorUnstable` where the motion diverges: a rub's dry friction can drive
+    a backward whip that grows without bound in a contact model with no stator to stop it
+    (seed 11's rub reached a 25 m orbit), and an integrator that gives up is the same."""
     t_settle = min(5.0 / (r.zeta * r.wn), 8.0)
     rhs = _rhs(r)
     atol = [1e-13, 1e-13, 1e-11, 1e-11]
     start = _start_state(r, -t_settle)
     if "kc" in r.p:  # two disks: settled from rest over the same time (5 decay times of the first mode)
         rhs, atol, start = _rhs_two_disks(r), atol * 2, [0.0] * 8
-    pre = solve_ivp(rhs, (-t_settle, 0.0), start, method="DOP853", rtol=1e-9, atol=atol)
+    # the drawn steady peak P times the factor, beyond twice any static deflection (a sag of up to 620 um)
+    limit = UNSTABLE_PEAK_FACTOR * r.e / (2 * r.zeta) + 2 * r.p.get("load_N", 0.0) / r.k
+
+    def diverged(_t, s):
+        return limit - math.hypot(s[0], s[1])
+
+    diverged.terminal = True
+    pre = solve_ivp(rhs, (-t_settle, 0.0), start, method="DOP853", rtol=1e-9, atol=atol, events=diverged)
+    if pre.status == 1:
+        raise SimulatorUnstable(f"the orbit passed {limit * 1e6:.0f} um ({UNSTABLE_PEAK_FACTOR:g}x the drawn peak, plus twice any sag) "
+                                f"while settling, at t = {pre.t_events[0][0]:.3g} s")
     if not pre.success:
-        raise RuntimeError(f"settling run failed: {pre.message}")
-    sol = solve_ivp(rhs, (0.0, float(t[-1])), pre.y[:, -1], method="DOP853", rtol=1e-9, atol=atol, t_eval=t)
+        raise SimulatorUnstable(f"settling run failed: {pre.message}")
+    sol = solve_ivp(rhs, (0.0, float(t[-1])), pre.y[:, -1], method="DOP853", rtol=1e-9, atol=atol, t_eval=t,
+                    events=diverged)
+    if sol.status == 1:
+        raise SimulatorUnstable(f"the orbit passed {limit * 1e6:.0f} um ({UNSTABLE_PEAK_FACTOR:g}x the drawn peak, plus twice any sag) "
+                                f"at t = {sol.t_events[0][0]:.3g} s")
     if not sol.success:
-        raise RuntimeError(f"integration failed: {sol.message}")
+        raise SimulatorUnstable(f"integration failed: {sol.message}")
     return sol.y[:2]
 
 
@@ -779,8 +805,14 @@ def run_one(case: str, seed: int, noise_um: float, *, fs: float | None = None, c
             profile: str = "linear") -> dict:
     """Simulate, write, read back and diagnose one record; its outcome (JSON-able)."""
     t0 = time.perf_counter()
-    rec, t, made = make_record(case, seed, noise_um, fs=fs, colour=colour, crack_law=crack_law, psi_deg=psi_deg,
-                               profile=profile)
+    try:
+        rec, t, made = make_record(case, seed, noise_um, fs=fs, colour=colour, crack_law=crack_law, psi_deg=psi_deg,
+                                   profile=profile)
+    except SimulatorUnstable as exc:  # no record to diagnose: said apart, not a product error
+        rotor, daq = draw_rotor(seed, case, fs=fs, crack_law=crack_law, psi_deg=psi_deg, profile=profile)
+        return {"case": case, "seed": seed, "noise_um": noise_um, "fs": daq["fs"], "colour": colour,
+                "unstable": str(exc), "right": False, "simulation_s": time.perf_counter() - t0,
+                "truth": {"text": f"{case} (simulator unstable)"}}
     sim_s = time.perf_counter() - t0
     out = {"case": case, "seed": seed, "noise_um": noise_um, "fs": rec.fs, "colour": colour,
            "true_noise_um": true_noise_um(rec), "truth": made["truth"], "simulation_s": sim_s,
@@ -817,6 +849,10 @@ def table(outcomes: list[dict]) -> str:
              "diagnosis (s) |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for o in outcomes:
+        if "unstable" in o:
+            lines.append(f"| {o['case']} | {o['noise_um']:g} | {o['fs'] / 1000:g} | {o['truth']['text']} | "
+                         f"not diagnosed: the simulator diverged ({o['unstable'][:100]}) | - | - | - | - | - | - | - |")
+            continue
         if "error" in o:
             lines.append(f"| {o['case']} | {o['noise_um']:g} | {o['fs'] / 1000:g} | {o['truth']['text']} | ERROR "
                          f"{o['error'][:120]} | - | - | - | - | - | no | - |")
@@ -836,6 +872,8 @@ def problems(outcomes: list[dict]) -> list[str]:
     out = []
     for o in outcomes:
         head = f"{o['case']} at {o['noise_um']:g} um ({o['fs'] / 1000:g} kHz, seed {o['seed']})"
+        if "unstable" in o:
+            continue  # no record was made: listed apart in main
         if "error" in o:
             out.append(f"{head}: ERROR {o['error']}")
             continue
@@ -890,7 +928,7 @@ def main(argv: list[str] | None = None) -> int:
             o = run_one(case, args.seed, noise, fs=args.fs, colour=args.colour, crack_law=args.crack_law,
                         keep=Path(args.keep) if args.keep else None, profile=args.profile)
             outcomes.append(o)
-            status = ("ERROR " + o["error"]) if "error" in o else (
+            status = ("SIMULATOR UNSTABLE " + o["unstable"]) if "unstable" in o else ("ERROR " + o["error"]) if "error" in o else (
                 f"{'ok ' if o['right'] else 'BAD'} named {o['named']} floor {o['floor_ratio'] or math.nan:.2f}x "
                 f"sim {o['simulation_s']:.0f} s diag {o['diagnosis_s']:.0f} s")
             print(f"[{len(outcomes)}/{total} {time.perf_counter() - t0:.0f} s] {case} {noise:g} um "
@@ -902,6 +940,11 @@ def main(argv: list[str] | None = None) -> int:
     print("\nProblems (missed, wrong effect, crack for a non-crack, floor outside 1.5x, crack > 5 % / 5 deg):")
     for line in problems(outcomes) or ["none"]:
         print(f"- {line}")
+    unstable = [o for o in outcomes if "unstable" in o]
+    if unstable:
+        print("\nNot diagnosed, the foreign simulator's own motion diverged (a drawn rotor, not the product):")
+        for o in unstable:
+            print(f"- {o['case']} at {o['noise_um']:g} um (seed {o['seed']}): {o['unstable']}")
     print(f"\n{len(outcomes)} records in {time.perf_counter() - t0:.0f} s")
     return 0
 

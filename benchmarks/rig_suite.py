@@ -322,7 +322,7 @@ def crack_errors(fault: str, truth: dict, params: dict) -> dict:
 
 def _crack(o: dict) -> dict:
     """The crack errors of an outcome, recomputed from its stored parameters."""
-    if "error" in o:
+    if "error" in o or "unstable" in o:
         return {}
     return crack_errors(o["spec"]["fault"], o["truth"]["fault"], o.get("parameters") or {})
 
@@ -335,12 +335,17 @@ def run_record(spec: RecordSpec) -> dict:
     from rotor_env.measurements.rig import load_rig
     from rotor_env.measurements.waveforms import load_waveforms
     from rotor_env.results import jsonable
+    from rotor_env.simulator import SimulationError
 
     out = {"spec": asdict(spec), "true_floor": true_floor(spec)}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="rig_suite_") as tmp:
         try:
             rig_path, data_path, truth = make_record(spec, Path(tmp))
+        except SimulationError as exc:  # the drawn rotor diverged: no record, said apart from the product's errors
+            out.update(unstable=str(exc), wall_s=time.perf_counter() - t0)
+            return jsonable(out)
+        try:
             out["truth"] = truth
             t1 = time.perf_counter()
             with warnings.catch_warnings():
@@ -399,7 +404,8 @@ def detection_table(outcomes: list[dict]) -> str:
              "|---|---|---|---|---|---|---|---|---|---|"]
     for key in sorted({_row_key(o) for o in outcomes}):
         rows = [o for o in outcomes if _row_key(o) == key]
-        ok = [o for o in rows if "error" not in o]
+        ok = [o for o in rows if "error" not in o and "unstable" not in o]
+        unstable = sum("unstable" in o for o in rows)
         faults = [o for o in ok if o["spec"]["fault"] in FAULTS]
         clean = [o for o in ok if o["spec"]["fault"] in ("healthy", "runout")]
         noncrack = [o for o in faults if o["spec"]["fault"] not in CRACKS]
@@ -416,7 +422,7 @@ def detection_table(outcomes: list[dict]) -> str:
             f"| {(f'{statistics.median(sizes):.1f} % ({max(sizes):.1f} %)') if sizes else '-'} "
             f"| {(f'{statistics.median(axes):.1f} ({max(axes):.1f})') if axes else '-'} "
             f"| {sum(bool(o.get('change_said')) for o in ok)}/{len(ok)} "
-            f"| {len(rows) - len(ok)} |")
+            f"| {len(rows) - len(ok) - unstable}{f' ({unstable} not made: the simulator diverged)' if unstable else ''} |")
     return "\n".join(lines)
 
 
@@ -438,10 +444,13 @@ def per_fault_table(outcomes: list[dict]) -> str:
     for kind in KINDS:
         cells = []
         for n in noises:
-            rows = [o for o in outcomes if o["spec"]["fault"] == kind and _row_key(o) == n]
+            every = [o for o in outcomes if o["spec"]["fault"] == kind and _row_key(o) == n]
+            rows = [o for o in every if "unstable" not in o]
             und = sum(bool(o.get("said_undecidable")) for o in rows)
+            not_made = len(every) - len(rows)
             cells.append((f"{sum(bool(o.get('right')) for o in rows)}/{len(rows)}"
-                          + (f" ({und} undecidable)" if und else "")) if rows else "-")
+                          + (f" ({und} undecidable)" if und else "")
+                          + (f" ({not_made} not made: the simulator diverged)" if not_made else "")) if every else "-")
         if any(c != "-" for c in cells):
             lines.append(f"| {kind} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -455,6 +464,9 @@ def failures(outcomes: list[dict]) -> list[str]:
                 f"zeta {s['zeta']:.3f}, {s['sample_rate'] / 1000:g} kHz, {s['direction']}, seed {s['seed']})")
         if "error" in o:
             out.append(f"{head}: ERROR {o['error']}")
+            continue
+        if "unstable" in o:
+            out.append(f"{head}: not made, the simulator diverged ({o['unstable']})")
             continue
         cr = _crack(o)
         crack_bad = cr and (cr["size_error"] > 0.05 or cr["axis_error_deg"] > 5.0)
@@ -606,7 +618,7 @@ def main(argv: list[str] | None = None) -> int:
             o = fut.result()
             outcomes.append(o)
             s = o["spec"]
-            status = ("ERROR " + o["error"]) if "error" in o else (
+            status = ("ERROR " + o["error"]) if "error" in o else ("NOT MADE " + o["unstable"]) if "unstable" in o else (
                 f"{'ok ' if o['right'] else 'MISS'} named {o['named']} floor {o['floor_ratio'] or math.nan:.2f}x "
                 f"{o['diagnosis_s']:.0f} s")
             print(f"[{len(outcomes)}/{len(specs) + len(done)} {time.perf_counter() - t0:.0f} s] #{s['index']} {s['fault']} "

@@ -146,3 +146,20 @@ def test_gasch_hinge_crack_breathing_with_the_whirl_named():
     assert "error" not in o, _describe(o)
     assert o["named"] == ["hinge_crack"] and o["verdict"] == "explained_after_adding", _describe(o)
     assert o["crack"]["size_error"] <= 0.05 and o["crack"]["axis_error_deg"] <= 5.0, _describe(o)
+
+
+def test_a_diverging_simulation_is_said_apart_not_diagnosed():
+    """Seed 11's rub drives a dry-friction whip that grows without bound in a contact model
+    with no stator (a 25 m orbit once): the benchmark stops the integration where the orbit
+    leaves 20x the drawn peak and reports the record as the simulator's, not as a product
+    error or a miss.  Control: seed 0's rub (above) is simulated and diagnosed."""
+    o = fr.run_one("rub", 11, NOISE_UM)
+    assert "unstable" in o and "error" not in o, o
+    assert "orbit passed" in o["unstable"] and "t = " in o["unstable"]
+    # the event stops the integration where it leaves the rig, not at the record's end
+    t_stop = float(o["unstable"].rsplit("t = ", 1)[1].split()[0])
+    assert t_stop < fr.draw_rotor(11, "rub")[0].duration
+    line = fr.table([o]).splitlines()[-1]
+    assert "the simulator diverged" in line and "ERROR" not in line
+    assert fr.problems([o]) == []
+    assert "unstable" not in outcome("rub")
