@@ -17,6 +17,19 @@ def _cmd_identifier_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_warm_up(args: argparse.Namespace) -> int:
+    import time
+
+    from .warmup import warm_up
+
+    t0 = time.perf_counter()
+    seconds = warm_up(progress=sys.stderr.isatty())
+    stages = ", ".join(f"{name} {s:.1f} s" for name, s in seconds.items())
+    print(f"rotor-id warm-up: the diagnosis's kernels are compiled and cached ({stages}; "
+          f"{time.perf_counter() - t0:.1f} s in all)")
+    return 0
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from .walkthrough import run_walkthrough
 
@@ -530,6 +543,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_demo)
     p = sub.add_parser("identifier-demo", help="the recursive-QR identifier on a known linear system")
     p.set_defaults(func=_cmd_identifier_demo)
+    p = sub.add_parser("warm-up", help="compile the rig diagnosis's kernels once per machine (40-50 s the first "
+                       "time, seconds after): the first record then runs at its warm speed",
+                       description="Simulate a short rig run-up and diagnose it and its 1X table, so that numba "
+                       "compiles and caches every kernel (rotor_env/warmup.py). scripts/run-demo.sh runs it.")
+    p.set_defaults(func=_cmd_warm_up)
     _add_simulate_parser(sub)
     _add_paper_parser(sub)
     _add_diagnose_parsers(sub)
