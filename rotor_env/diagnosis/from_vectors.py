@@ -501,6 +501,7 @@ def diagnose_vectors(
         excess = current.rms ** 2 - floor ** 2
         best = None
         round_fits: dict[str, VectorFit] = {}
+        accepted: dict[str, VectorFit] = {}
         for cand in remaining:
             trial = current.model.with_effect(cand)
             if cand != RUNOUT and cand != SECOND_MODE and trial.kinds.get(cand) == "rotating" \
@@ -529,10 +530,12 @@ def diagnose_vectors(
             if rule is not None:
                 rejected.append({"effect": cand, "rule": rule})
                 continue
+            accepted[cand] = fit
             if best is None or fit.rms < best[1].rms:
                 best = (cand, fit)
         if best is None:
             break
+        best = _simplest_within_noise(best, accepted, floor)
         best, why = _bow_or_runout(best, round_fits, floor, table.amp_unit)
         if why:
             undecidable[BOW] = why
@@ -559,6 +562,29 @@ def diagnose_vectors(
                      "jitter) times the 1X amplitude")
     return VectorDiagnosis(table, before, current, missing, floor, tested, rejected, notes, phase,
                            {e: t for e, t in undecidable.items() if e not in missing})
+
+
+def _simplest_within_noise(best: tuple[str, VectorFit], accepted: dict[str, VectorFit],
+                           floor: float) -> tuple[str, VectorFit]:
+    """Of the candidates that passed every rule, the one with fewest parameters whose fit the
+    best one's does not beat by more than noise: a likelihood-ratio test at 1 % with the extra
+    parameters' degrees of freedom, the residual in the floor's variance per real component.
+    An open crack is a breathing crack that does not breathe (depth 0, its isotropic part in
+    the stiffness): both fit its table to the floor, and the open crack is the reading."""
+    from scipy.stats import chi2
+
+    if not floor > 0:
+        return best
+    rss_best = float(np.nansum(np.abs(best[1].residual) ** 2))
+    simpler = None
+    for cand, fit in accepted.items():
+        extra = len(best[1].param_names) - len(fit.param_names)
+        if cand == best[0] or extra <= 0:
+            continue
+        gap = 2.0 * (float(np.nansum(np.abs(fit.residual) ** 2)) - rss_best) / floor ** 2
+        if gap <= chi2.ppf(0.99, extra) and (simpler is None or len(fit.param_names) < len(simpler[1].param_names)):
+            simpler = (cand, fit)
+    return simpler or best
 
 
 def _bow_or_runout(best: tuple[str, VectorFit], fits: dict[str, VectorFit], floor: float,

@@ -21,7 +21,7 @@ from scipy.optimize import least_squares
 from ...effects import get_effect
 from ...measurements.vectors import SPEED_UNITS, VectorTable
 from .criticals import critical_speeds
-from .model import RUNOUT, SECOND_MODE, SynchronousModel
+from .model import RUNOUT, SECOND_MODE, SynchronousModel, harmonic_order
 from .response import (
     Profile,
     quasi_steady_response,
@@ -38,6 +38,8 @@ __all__ = ["QUASI_STEADY_TOL", "W_REF_DECADES", "VectorFit", "extra_mode_vectors
 QUASI_STEADY_TOL = 0.01
 #: the fitted natural frequency stays within this factor of the run's speeds
 W_REF_DECADES = 10.0
+#: starts across an orientation's period for a new effect whose orientation enters non-linearly
+ORIENTATION_STARTS = 4
 
 
 @dataclass
@@ -102,8 +104,12 @@ class VectorFit:
         """Each effect's physical parameters (forcing amplitudes in the table's unit)."""
         out: dict[str, dict[str, float]] = {}
         for name in self.model.effects:
-            c = (self.structural | self.forcing)[name]
-            out[name] = get_effect(name).from_coefficients(np.asarray(c, dtype=float))
+            if name in self.structural:
+                c, angles = self.model.structural_values(name, self.structural[name])
+            else:
+                c, angles = np.asarray(self.forcing[name], dtype=float), ()
+            out[name] = get_effect(name).from_coefficients(c)
+            out[name].update(_orientations(self.model, name, out[name], angles))
         if self.runout is not None:
             out[RUNOUT] = {p: float(abs(v)) for p, v in zip(self.table.probes, self.runout, strict=True)}
         out["natural_frequency"] = {"rpm": self.w_ref / SPEED_UNITS["rpm"]}
@@ -112,6 +118,18 @@ class VectorFit:
             out[SECOND_MODE] = {"natural_frequency_rpm": w / SPEED_UNITS["rpm"], "c": c,
                                 "unbalance": float(np.hypot(u[0], u[1]))}
         return out
+
+
+def _orientations(model: SynchronousModel, name: str, values: dict[str, float],
+                  angles: tuple[float, ...]) -> dict[str, float]:
+    """The fitted orientations by name, each within its period (an effect harmonic in its
+    orientation has a size >= 0 by construction: the angle carries the sign)."""
+    eff = get_effect(name)
+    out = {}
+    for q, a in zip(model.fitted_orientations(name), angles, strict=True):
+        p = eff.argument_parameters[q]
+        out[p.name] = float(np.mod(a, p.angle_period))
+    return out
 
 
 class _Problem:
@@ -141,7 +159,7 @@ class _Problem:
         for e in model.forcing:
             for q in range(slots[e].stop - slots[e].start):
                 self.basis.append((e, q))
-        self.struct_sizes = [(e, slots[e].stop - slots[e].start) for e in model.structural]
+        self.struct_sizes = [(e, model.n_structural(e)) for e in model.structural]
         self.n_extra = model.modes - 1
         self.basis += [(SECOND_MODE, q) for _ in range(self.n_extra) for q in range(2)]
         W_abs = table.speed
@@ -335,25 +353,39 @@ def fit_vectors(
     prob = _Problem(model, table, chosen)
     n_struct = sum(n for _, n in prob.struct_sizes) + 2 * prob.n_extra
     starts: list[np.ndarray] = []
+    new_angles = 1
     if start is not None:
-        x = [math.log(start.w_ref)]
+        x = [[math.log(start.w_ref)]]
         for e, n in prob.struct_sizes:
-            x += list(start.structural.get(e, np.full(n, _nonzero_start(e))))
+            old = start.structural.get(e)
+            if old is not None and len(old) == n:
+                x = [xs + list(old) for xs in x]
+            elif len(model.fitted_orientations(e)) and not harmonic_order(e):
+                # an orientation entering non-linearly: a few starts around its period, ranked
+                # by their misfit at a typical size (the best one fitted)
+                period = get_effect(e).argument_parameters[model.fitted_orientations(e)[0]].angle_period
+                size = _typical_size(e)
+                x = [xs + list(model.structural_start(e, size, period * k / ORIENTATION_STARTS))
+                     for xs in x for k in range(ORIENTATION_STARTS)]
+                new_angles = len(x)
+            else:
+                x = [xs + list(model.structural_start(e, _nonzero_start(e))) for xs in x]
         extra = [[math.log(w), c] for w, c in start.extra_modes]
-        if len(extra) < prob.n_extra:
-            # a new mode where the fit so far fails most, at a few dampings
-            mag = np.sqrt(np.nanmean(np.abs(start.residual) ** 2, axis=1))
-            w_new = float(table.speed[int(np.nanargmax(mag))])
-            for f, c in ((1.0, 0.06), (0.97, 0.03), (1.03, 0.03), (1.0, 0.2)):
-                starts.append(np.array(x + [v for m in extra for v in m] + [math.log(w_new * f), c]))
-        else:
-            starts.append(np.array(x + [v for m in extra for v in m]))
+        for xs in x:
+            if len(extra) < prob.n_extra:
+                # a new mode where the fit so far fails most, at a few dampings
+                mag = np.sqrt(np.nanmean(np.abs(start.residual) ** 2, axis=1))
+                w_new = float(table.speed[int(np.nanargmax(mag))])
+                for f, c in ((1.0, 0.06), (0.97, 0.03), (1.03, 0.03), (1.0, 0.2)):
+                    starts.append(np.array(xs + [v for m in extra for v in m] + [math.log(w_new * f), c]))
+            else:
+                starts.append(np.array(xs + [v for m in extra for v in m]))
     starts += [np.asarray(s, dtype=float) for s in extra_starts]
     if start is None:
         for w0, c0 in _initial_guesses(table, model.ip):
             x = [math.log(w0)]
-            for e, n in prob.struct_sizes:
-                x += [c0] if e == "viscous_damping" else [_nonzero_start(e)] * n
+            for e, _ in prob.struct_sizes:
+                x += [c0] if e == "viscous_damping" else list(model.structural_start(e, _nonzero_start(e)))
             starts.append(np.array(x))
     lower = np.full(1 + n_struct, -np.inf)
     upper = np.full(1 + n_struct, np.inf)
@@ -367,13 +399,12 @@ def fit_vectors(
         lower[k + 1], upper[k + 1] = 1e-4, 2.0
     j = 1
     for e, n in prob.struct_sizes:
-        eff = get_effect(e)
-        for q in range(n):
-            p = eff.parameters[min(q, len(eff.parameters) - 1)]
-            # the simulator's domain (damping >= 0, anisotropy < 1); the plausibility bounds are checked later
+        n_free = n - (0 if harmonic_order(e) else len(model.fitted_orientations(e)))
+        for q in range(n_free):
+            # the simulator's domain (damping >= 0, anisotropy < 1); the plausibility bounds are
+            # checked later; an orientation (after the coefficients) is free
             lower[j + q] = 0.0 if e == "viscous_damping" else -0.95
             upper[j + q] = 2.0 if e == "viscous_damping" else 0.95
-            del p
         j += n
     def solve(problem: _Problem, xs: list[np.ndarray], keep: int | None = None):
         best = None
@@ -398,7 +429,7 @@ def fit_vectors(
         best_q = solve(_Problem(model, table, "quasi-steady", orders=(1,)), starts, keep=3)
         starts = [best_q.x + np.r_[d, np.zeros(n_struct)] for d in (0.0, -0.03, 0.03)]
     # a new mode's starts (four around the worst misfit): the two that fit best at the start
-    best = solve(prob, starts, keep=2 if prob.n_extra and chosen == "transient" else None)
+    best = solve(prob, starts, keep=2 if prob.n_extra and chosen == "transient" else (1 if new_angles > 1 else None))
     if method == "auto" and table.t is not None and chosen == "transient" and start is None and prob.orders == (1,):
         # keep the quasi-steady model only where it is as good as the transient one
         Bt = prob.basis_vectors(best.x, "transient")
@@ -408,6 +439,24 @@ def fit_vectors(
         if np.nanmax(np.abs(pt - pq)) <= QUASI_STEADY_TOL * np.nanmax(np.abs(pt)):
             prob.method = "quasi-steady"
     return _finish(prob, best.x, best.success)
+
+
+def _structural_name(model: SynchronousModel, effect: str, q: int) -> str:
+    """``effect[q]`` for a coefficient (what the Wald tests read), ``effect.NAME`` for a
+    fitted orientation (undefined where the effect is absent: not tested)."""
+    n_coef = model.n_structural(effect) - (0 if harmonic_order(effect) else len(model.fitted_orientations(effect)))
+    if q < n_coef:
+        return f"{effect}[{q}]"
+    p = get_effect(effect).argument_parameters[model.fitted_orientations(effect)[q - n_coef]]
+    return f"{effect}.{p.name}"
+
+
+def _typical_size(effect: str) -> float:
+    """A size at which a new effect's orientation starts are ranked: its declared default's
+    coefficients, their largest magnitude."""
+    eff = get_effect(effect)
+    c = np.asarray(eff.to_coefficients({p.name: p.default for p in eff.parameters}), dtype=float)
+    return float(np.abs(c).max()) if c.size and np.abs(c).max() > 0 else 1e-2
 
 
 def _nonzero_start(effect: str) -> float:
@@ -457,7 +506,7 @@ def _finish(prob: _Problem, x: np.ndarray, success: bool) -> VectorFit:
     if prob.model.runout:
         runout = sol[n_f::2] + 1j * sol[n_f + 1 :: 2]
     # Jacobian of the whole residual w.r.t. all parameters (nonlinear and linear), for the HAC tests
-    names = ["log_w_ref"] + [f"{e}[{q}]" for e, n in prob.struct_sizes for q in range(n)]
+    names = ["log_w_ref"] + [_structural_name(prob.model, e, q) for e, n in prob.struct_sizes for q in range(n)]
     names += [f"{SECOND_MODE}.{k}" for _ in range(prob.n_extra) for k in ("log_w", "c")]
     copies = prob.n_forcing // max(len(prob.basis), 1)
     names += [f"{e}[{q}]" + (f"@{p}" if copies > 1 else "") for p in prob.table.probes[:copies]

@@ -10,6 +10,7 @@ simulator's vector and its linearisation at a speed, which :mod:`.response` pred
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -19,7 +20,7 @@ import numpy as np
 from ...effects import EFFECTS, DerivedNames, get_effect, synchronous_effects
 from ...simulator import compile_accel, smooth_effects
 
-__all__ = ["RUNOUT", "SECOND_MODE", "VECTOR_EFFECTS", "SynchronousModel", "known_effects"]
+__all__ = ["RUNOUT", "SECOND_MODE", "VECTOR_EFFECTS", "SynchronousModel", "harmonic_order", "known_effects"]
 
 #: the measurement term "probe runout": a constant 1X vector per probe
 RUNOUT = "runout"
@@ -139,14 +140,65 @@ class SynchronousModel:
                 coef[j + len(e.coefficients) + q] = p.default
             j += e.kernel_width
 
+    def fitted_orientations(self, name: str) -> tuple[int, ...]:
+        """Which of a rotating effect's argument parameters are orientations fitted with its
+        coefficients (indices among :attr:`~rotor_env.effects.Effect.argument_parameters`).
+
+        A crack's axis sits anywhere relative to the keyphasor notch, and with an unbalance
+        somewhere else the 1X response depends on the angle between them (the split critical's
+        two branches carry the unbalance's components along the stiff and weak axes): with the
+        axis held at the notch, a crack 30 deg from it left a 1X/2X table 40x above its floor.
+        A fixed-frame stiffness's orientation (the supports' stiff axis) is relative to the
+        probes, which are anywhere too.  A forcing's phase is in its linear coefficients."""
+        if self.kinds.get(name) not in ("rotating", "structural"):
+            return ()
+        return tuple(q for q, p in enumerate(get_effect(name).argument_parameters) if p.orientation)
+
+    def n_structural(self, name: str) -> int:
+        """Nonlinear parameters of a structural or rotating effect in a fit: for an effect
+        harmonic in its orientation (:func:`harmonic_order`) the two Cartesian components of
+        its coefficient, else its coefficients then its fitted orientations (rad)."""
+        if self.fitted_orientations(name) and harmonic_order(name):
+            return 2
+        return len(get_effect(name).coefficients) + len(self.fitted_orientations(name))
+
+    def structural_values(self, name: str, v: np.ndarray) -> tuple[np.ndarray, tuple[float, ...]]:
+        """A structural or rotating effect's fitted parameters ``v`` as its coefficients and
+        its fitted orientations' values (rad)."""
+        v = np.atleast_1d(np.asarray(v, dtype=float))
+        orient = self.fitted_orientations(name)
+        n_coef = len(get_effect(name).coefficients)
+        if not orient or len(v) == n_coef:
+            return v[:n_coef], ()
+        n = harmonic_order(name)
+        if n:
+            return np.array([math.hypot(v[0], v[1])]), (math.atan2(v[1], v[0]) / n,)
+        return v[:n_coef], tuple(float(a) for a in v[n_coef:])
+
+    def structural_start(self, name: str, size: float, angle: float = 0.0) -> np.ndarray:
+        """Fit parameters of a new structural or rotating effect: every coefficient at
+        ``size``, the orientation at ``angle``."""
+        orient = self.fitted_orientations(name)
+        if orient and harmonic_order(name):
+            n = harmonic_order(name)
+            return np.array([size * math.cos(n * angle), size * math.sin(n * angle)])
+        return np.array([size] * len(get_effect(name).coefficients) + [angle] * len(orient))
+
     def coef_vector(self, structural: dict[str, np.ndarray], forcing: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """The simulator's coefficient vector: each effect's coefficients, and after a rotating
+        effect's coefficients in ``structural`` its fitted orientations (:meth:`fitted_orientations`)."""
         slots = self._slots()
         coef = np.zeros(sum(e.kernel_width for e in smooth_effects(self.layout)))
         self._argument_defaults(coef)
         coef[slots["stiffness"]] = 1.0
         for d in (structural, forcing or {}):
             for k, v in d.items():
-                coef[slots[k]] = v
+                sl = slots[k]
+                if d is structural:
+                    v, angles = self.structural_values(k, v)
+                    for a, q in zip(angles, self.fitted_orientations(k), strict=False):
+                        coef[sl.stop + q] = a
+                coef[sl] = v
         return coef
 
     def linearised(self, coef: np.ndarray, speed: float) -> tuple[np.ndarray, np.ndarray]:
@@ -171,6 +223,34 @@ class SynchronousModel:
         ph = np.linspace(0.0, 2 * math.pi, 16, endpoint=False)
         f = np.array([accel(p, speed, accel_rate, 0.0, 0.0, 0.0, 0.0, self.ip, coef) for p in ph])
         return (2.0 / len(ph)) * (f.T @ np.exp(-1j * ph))
+
+
+@functools.cache
+def harmonic_order(name: str) -> int:
+    """``n`` where an effect of one coefficient and one orientation ``a`` has columns
+    ``cos(n a) C(0) + sin(n a) C(pi / 2n)`` at every state and spin angle: its moment is then
+    linear in the complex coefficient ``D e^{i n a}`` (a shaft asymmetry: ``n = 2``,
+    ``-D e^{2 i (phi + a)} conj(z)``), fitted as its two Cartesian components -- smooth
+    through ``D = 0``, where the angle alone is undefined, and tested as two coefficients.
+    0 for any other effect (checked numerically at random states)."""
+    eff = get_effect(name)
+    if len(eff.coefficients) != 1 or len(eff.argument_parameters) != 1 or not eff.argument_parameters[0].orientation:
+        return 0
+    rng = np.random.default_rng(3)
+    states = rng.normal(size=(4, 4))
+    phis = rng.uniform(0.0, 2 * math.pi, 4)
+    for n in (1, 2, 3):
+        ok = True
+        for a in rng.uniform(0.0, 2 * math.pi, 3):
+            for s, ph in zip(states, phis, strict=True):
+                got = np.array(eff.columns(ph, 1.3, 0.0, *s, 0.2, a), dtype=float)
+                base = np.array(eff.columns(ph, 1.3, 0.0, *s, 0.2, 0.0), dtype=float)
+                quad = np.array(eff.columns(ph, 1.3, 0.0, *s, 0.2, math.pi / (2 * n)), dtype=float)
+                if not np.allclose(got, math.cos(n * a) * base + math.sin(n * a) * quad, rtol=1e-9, atol=1e-12):
+                    ok = False
+        if ok:
+            return n
+    return 0
 
 
 def known_effects() -> tuple[str, ...]:
