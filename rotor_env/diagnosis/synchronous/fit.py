@@ -38,6 +38,8 @@ __all__ = ["QUASI_STEADY_TOL", "W_REF_DECADES", "VectorFit", "extra_mode_vectors
 QUASI_STEADY_TOL = 0.01
 #: the fitted natural frequency stays within this factor of the run's speeds
 W_REF_DECADES = 10.0
+#: the solver's budget of residual evaluations per start
+MAX_ITERATIONS = 200
 #: starts across an orientation's period for a new effect whose orientation enters non-linearly
 ORIENTATION_STARTS = 4
 
@@ -336,12 +338,15 @@ def fit_vectors(
     method: str = "auto",
     start: VectorFit | None = None,
     extra_starts: Sequence[np.ndarray] = (),
+    max_iterations: int = MAX_ITERATIONS,
 ) -> VectorFit:
     """Least-squares fit of ``model`` to the 1X vectors of ``table``.
 
     ``method``: ``"quasi-steady"``, ``"transient"`` (needs a time column) or ``"auto"``
     (see the module docstring).  ``start``: a previous fit whose parameters seed this one
-    (the diagnosis adds one effect at a time).
+    (the diagnosis adds one effect at a time).  ``max_iterations``: the solver's evaluations
+    of the residual (its Jacobian's differences not counted); a fit stopped there has
+    ``success`` False and can be continued with ``start=`` it.
     """
     if method not in ("auto", "quasi-steady", "transient"):
         raise ValueError(f"method must be 'auto', 'quasi-steady' or 'transient', got {method!r}")
@@ -417,7 +422,7 @@ def fit_vectors(
             xs = [xs[i] for i in np.argsort(cost)[:keep]]
         for x0 in xs:
             res = least_squares(problem.residual, x0, bounds=(lower, upper), x_scale="jac", method="trf",
-                                diff_step=1e-6, max_nfev=200)
+                                diff_step=1e-6, max_nfev=max_iterations)
             if best is None or res.cost < best.cost:
                 best = res
         return best
