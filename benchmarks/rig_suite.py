@@ -35,6 +35,7 @@ against probe noise, the per-fault table, every failure, the time per record.
     python benchmarks/rig_suite.py --noise 0.5 --artefacts    # with mains hum and a scratch on every track
     python benchmarks/rig_suite.py --noise 0.5 --drift 20     # the probes' mean moving by 20 um (centreline, thermal)
     python benchmarks/rig_suite.py --noise 0.5 --flicker 100  # 1/f probe noise with its corner at 100 Hz
+    python benchmarks/rig_suite.py --noise 0.5 --vectors      # each record's 1X/2X table diagnosed instead of its waveforms
     python benchmarks/rig_suite.py --report seed1.json seed2.json   # the tables of saved runs together
 """
 
@@ -108,6 +109,9 @@ class RecordSpec:
     #: the probes' 1/f noise corner (``--flicker``, Hz): their noise density the white
     #: noise's times ``1 + corner / f``
     flicker_hz: float = 0.0
+    #: diagnose the record's order-tracked 1X/2X table (``--vectors``: ``rotor-id diagnose
+    #: TABLE --vectors --rig``) instead of its waveforms
+    vectors: bool = False
 
 
 def build_specs(noises=NOISES_UM, kinds=KINDS, reps: int = 1, seed: int = 0, quick: bool = False) -> list[RecordSpec]:
@@ -327,6 +331,20 @@ def _crack(o: dict) -> dict:
     return crack_errors(o["spec"]["fault"], o["truth"]["fault"], o.get("parameters") or {})
 
 
+def _diagnose_table(record, rig_path: Path, folder: Path) -> dict:
+    """The record's 1X/2X table (order-tracked per revolution, as a DAQ's tracker writes it)
+    diagnosed as ``rotor-id diagnose TABLE --vectors --rig RIG`` does, in the waveform
+    diagnosis's JSON shape (``parameters``: effect -> values)."""
+    from rotor_env.batch import diagnose_file
+
+    path = folder / "vectors.csv"
+    record.vectors((1, 2)).to_csv(path, phase="lag")
+    d = diagnose_file(path, vectors=True, rig=rig_path).to_dict()
+    d["parameters"] = {e: {"values": v} for e, v in (d.get("physical") or {}).items()}
+    d["vectors"] = {"missing": d.get("missing"), "verdict": d.get("verdict")}
+    return d
+
+
 def run_record(spec: RecordSpec) -> dict:
     """Simulate, write, read back and diagnose one record; its outcome as JSON-able data."""
     import warnings
@@ -351,7 +369,10 @@ def run_record(spec: RecordSpec) -> dict:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 record = load_waveforms(data_path, load_rig(rig_path))
-                d = diagnose_rig(record).to_dict()
+                if spec.vectors:
+                    d = _diagnose_table(record, rig_path, Path(tmp))
+                else:
+                    d = diagnose_rig(record).to_dict()
             out["diagnosis_s"] = time.perf_counter() - t1
         except Exception as exc:  # a record that fails is an outcome, not the suite's end
             out.update(error=f"{type(exc).__name__}: {exc}", wall_s=time.perf_counter() - t0)
@@ -366,13 +387,15 @@ def run_record(spec: RecordSpec) -> dict:
                parameters=params, rejected=d.get("rejected"), notes=d.get("notes"),
                undecidable=d.get("undecidable") or {},
                detectability={e: v.get("sentence") for e, v in (d.get("detectability") or {}).items()})
-    out["floor_ratio"] = (d["noise_floor"] / out["true_floor"]) if d.get("noise_floor") else None
+    # a table's floor is per revolution's vector, not the probes' noise: no ratio to read
+    out["floor_ratio"] = (d["noise_floor"] / out["true_floor"]) if d.get("noise_floor") and not spec.vectors else None
     f = spec.fault
     out["crack_named_falsely"] = f not in CRACKS and any(c in named for c in CRACKS)
     if f == "healthy":
         out["right"] = not named
     elif f == "runout":
-        out["right"] = not named and "runout" in vec_missing
+        # a table's diagnosis names runout among its own terms; the waveforms' carry the vectors' reading
+        out["right"] = named == ["runout"] if spec.vectors else (not named and "runout" in vec_missing)
     else:
         out["right"] = f in named
     # every record's rotor is the same from start to end: how often the parameter-constancy
@@ -380,7 +403,9 @@ def run_record(spec: RecordSpec) -> dict:
     out["change_said"] = bool((d.get("change") or {}).get("changed"))
     # what moved at the break, per effect (the sup-LM's share): is a named effect among them?
     out["change"] = {k: (d.get("change") or {}).get(k) for k in ("statistic", "p_value", "fraction", "moved")}
-    out["false_alarm"] = f in ("healthy", "runout") and bool(named)
+    # a runout record's table names runout (its own term), not a fault
+    out["false_alarm"] = f in ("healthy", "runout") and bool(
+        [n for n in named if not (spec.vectors and f == "runout" and n == "runout")])
     # a fault not named that the diagnosis says it cannot decide: the limit stated, not a miss
     out["said_undecidable"] = not out["right"] and f in out["undecidable"]
     out["crack"] = crack_errors(f, truth["fault"], params)
@@ -426,14 +451,15 @@ def detection_table(outcomes: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def _row_key(o: dict) -> tuple[float, bool, float, float]:
+def _row_key(o: dict) -> tuple[float, bool, float, float, bool]:
     return (o["spec"]["noise_um"], bool(o["spec"].get("artefacts")), float(o["spec"].get("drift_um") or 0.0),
-            float(o["spec"].get("flicker_hz") or 0.0))
+            float(o["spec"].get("flicker_hz") or 0.0), bool(o["spec"].get("vectors")))
 
 
-def _row_label(key: tuple[float, bool, float, float]) -> str:
+def _row_label(key: tuple[float, bool, float, float, bool]) -> str:
     return (f"{key[0]:g}" + (" + hum, scratch" if key[1] else "")
-            + (f" + {key[2]:g} drift" if key[2] else "") + (f" + 1/f below {key[3]:g} Hz" if key[3] else ""))
+            + (f" + {key[2]:g} drift" if key[2] else "") + (f" + 1/f below {key[3]:g} Hz" if key[3] else "")
+            + (" (1X/2X table)" if key[4] else ""))
 
 
 def per_fault_table(outcomes: list[dict]) -> str:
@@ -475,7 +501,10 @@ def failures(outcomes: list[dict]) -> list[str]:
         fault = {k: round(v, 5) for k, v in (o["truth"]["fault"] or {}).items()}
         extra = (f"; crack (as {cr['as']}) size error {cr['size_error'] * 100:.1f} %, axis "
                  f"{cr['axis_error_deg']:.1f} deg" if cr else "")
-        rej = {k: v for k, v in (o.get("rejected") or {}).items() if k == o["spec"]["fault"]}
+        rejected = o.get("rejected") or {}
+        if isinstance(rejected, list):  # a table's diagnosis lists its rules
+            rejected = {r["effect"]: r["rule"] for r in rejected}
+        rej = {k: v for k, v in rejected.items() if k == o["spec"]["fault"]}
         extra += f"; {o['spec']['fault']} turned down: {rej[o['spec']['fault']]}" if rej else ""
         und = (o.get("undecidable") or {}).get(o["spec"]["fault"])
         det = (o.get("detectability") or {}).get(o["spec"]["fault"])
@@ -526,6 +555,9 @@ def main(argv: list[str] | None = None) -> int:
                          "the speed squared, each probe's gap drifting linearly by up to UM/2")
     ap.add_argument("--flicker", type=float, default=0.0, metavar="HZ",
                     help="the probes' 1/f noise on every record: its density the white noise's times 1 + HZ / f")
+    ap.add_argument("--vectors", action="store_true",
+                    help="diagnose each record's order-tracked 1X/2X table (rotor-id diagnose TABLE --vectors --rig) "
+                         "instead of its waveforms")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2, help="worker processes (one BLAS thread each)")
     ap.add_argument("--out", default="rig_suite.json", help="JSON of every outcome (rewritten after each record)")
@@ -580,6 +612,10 @@ def main(argv: list[str] | None = None) -> int:
         if not (math.isfinite(args.flicker) and args.flicker > 0):
             ap.error(f"--flicker: a positive corner frequency in Hz, got {args.flicker}")
         specs = [replace(s, flicker_hz=args.flicker) for s in specs]
+    if args.vectors:
+        from dataclasses import replace
+
+        specs = [replace(s, vectors=True) for s in specs]
     if args.medium:
         # a subset of the full plan (same indices and seeds): what a loaded 2-core machine
         # diagnoses in about half an hour
