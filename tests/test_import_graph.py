@@ -36,7 +36,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("rotor_env.plots",),
     ("rotor_env.diagnosis", "rotor_env.monitor", "rotor_env.envs", "rotor_env.wrappers",
      "rotor_env.paper", "rotor_env.effects_doc", "rotor_env.batch", "rotor_env.fleet", "rotor_env.balance",
-     "rotor_env.ray_cluster"),
+     "rotor_env.ray_cluster", "rotor_env.warmup"),
     # the command line and the tour
     ("rotor_env.cli", "rotor_env.walkthrough"),
     # the package facade (rotor_env/__init__.py)

@@ -556,10 +556,11 @@ def diagnose_vectors(
                 # crack wandering over a bow's table for 160 s before; the waveforms decide)
                 tested.append({"effect": cand, "F": F, "log10_p": log10_p, "rms": fit.rms, "gain": gain,
                                "plausible": False})
+                explained_by = best is not None and best[1].rms <= FLOOR_RATIO * floor
                 why = (f"removes only {100 * gain:.1f} % of the residual energy above the floor" if gain < MIN_GAIN
-                       else f"cannot come near {best[0]}, which explains the record" if best is not None
-                       and best[1].rms <= FLOOR_RATIO * floor else _crack_without_its_2x(fit, current, cand, floor))
-                if is_crack and gain >= MIN_GAIN:
+                       else f"cannot come near {best[0]}, which explains the record" if explained_by
+                       else _crack_without_its_2x(fit, current, cand, floor))
+                if is_crack and gain >= MIN_GAIN and not explained_by:
                     undecidable[cand] = f"{cand}: {why}"
                 rejected.append({"effect": cand, "rule": f"{why} after {SCREEN_ITERATIONS} iterations (not converged)"})
                 continue
