@@ -11,6 +11,7 @@ the same answer is seen with the time.
 
     python benchmarks/vector_speed.py                    # this checkout against main
     python benchmarks/vector_speed.py --baseline 7622279 --repeat 3
+    python benchmarks/vector_speed.py --with-2x --baseline e6226ea   # its 1X/2X table: the cracks tried too
 
 The baseline's code is exported with ``git archive`` into a temporary folder (no worktree).
 """
@@ -45,7 +46,7 @@ print(json.dumps({"first_s": times[0], "best_s": min(times[1:] or times), "criti
 """
 
 
-def write_table(path: Path) -> None:
+def write_table(path: Path, orders: tuple[int, ...] = (1,)) -> None:
     from rotor_env.measurements.rig import load_rig
     from rotor_env.params import RotorParams
     from rotor_env.rig_simulation import simulate_rig
@@ -56,7 +57,7 @@ def write_table(path: Path) -> None:
     params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6, "bow": 0.004},
                          effects=("stiffness", "viscous_damping", "unbalance", "shaft_bow"))
     run = simulate_rig(rig, params, rpm_per_s=93.0, sample_rate=3000.0, noise=0.3, seed=1)
-    run.vectors(rig, (1,)).to_csv(path, overwrite=True)
+    run.vectors(rig, orders).to_csv(path, overwrite=True)
 
 
 def time_code(code_root: Path, table: Path, repeat: int) -> dict:
@@ -83,14 +84,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=1,
                     help="timed calls after the warm-up (best is reported); 0: the first call only (numba's "
                          "kernels cached on disk from an earlier run: about the warm time)")
+    ap.add_argument("--with-2x", action="store_true",
+                    help="the same run's 1X and 2X columns (what `rotor-id simulate --vectors` writes): the crack "
+                         "and misalignment candidates are tried on the 2X as well")
     args = ap.parse_args(argv)
+    orders = (1, 2) if args.with_2x else (1,)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         table = tmp / "run800.csv"
-        write_table(table)
+        write_table(table, orders)
         new = time_code(ROOT, table, args.repeat)
         old = time_code(export(args.baseline, tmp), table, args.repeat)
-    print(f"# vector diagnosis of an 800-revolution 1X table ({new['rows']} rows), "
+    print(f"# vector diagnosis of an 800-revolution {'1X/2X' if args.with_2x else '1X'} table ({new['rows']} rows), "
           f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, one thread")
     print()
     print("| code | diagnosis (s, warm) | first call (s) | criticals (rpm, damping ratio) | missing | verdict |")
