@@ -526,6 +526,8 @@ def diagnose_vectors(
             if cand != RUNOUT and cand != SECOND_MODE and trial.kinds.get(cand) == "rotating" \
                     and SIDE_LOAD not in trial.effects:
                 trial = trial.with_effect(SIDE_LOAD)  # its 2X is the side load's static deflection, turned
+            is_crack = cand not in (RUNOUT, SECOND_MODE) and get_effect(cand).crack
+            screen_rule = None  # the 2X rule read on the screened fit, where it was
             try:
                 fit = fit_vectors(table, trial, method=current.method, start=current,
                                   max_iterations=SCREEN_ITERATIONS)
@@ -535,11 +537,11 @@ def diagnose_vectors(
                 could_matter = gain >= MIN_GAIN and (
                     best is None or best[1].rms > FLOOR_RATIO * floor
                     or len(fit.param_names) < len(best[1].param_names))
-                is_crack = cand not in (RUNOUT, SECOND_MODE) and get_effect(cand).crack
                 if could_matter and not fit.success and is_crack:
                     # a crack that does not take the 2X at half its critical after the first
                     # iterations is not fitted on (it wanders over a rub's table for minutes)
-                    could_matter = _crack_without_its_2x(fit, current, cand, floor) is None
+                    screen_rule = _crack_without_its_2x(fit, current, cand, floor)
+                    could_matter = screen_rule is None
                 stopped = not fit.success and not could_matter
                 if not fit.success and not stopped:
                     # promising but not converged: fitted on to convergence from where it stopped
@@ -559,7 +561,7 @@ def diagnose_vectors(
                 explained_by = best is not None and best[1].rms <= FLOOR_RATIO * floor
                 why = (f"removes only {100 * gain:.1f} % of the residual energy above the floor" if gain < MIN_GAIN
                        else f"cannot come near {best[0]}, which explains the record" if explained_by
-                       else _crack_without_its_2x(fit, current, cand, floor))
+                       else screen_rule)
                 if is_crack and gain >= MIN_GAIN and not explained_by:
                     undecidable[cand] = f"{cand}: {why}"
                 rejected.append({"effect": cand, "rule": f"{why} after {SCREEN_ITERATIONS} iterations (not converged)"})
@@ -576,7 +578,7 @@ def diagnose_vectors(
                 rule = f"implausible: {why}"
             else:
                 rule = None
-            if rule is None and cand not in (RUNOUT, SECOND_MODE) and get_effect(cand).crack:
+            if rule is None and is_crack:
                 rule = _crack_without_its_2x(fit, current, cand, floor)
                 if rule is not None:
                     undecidable[cand] = f"{cand}: {rule}"
