@@ -348,3 +348,41 @@ def test_follow_picks_up_appended_si_rows(healthy_runs, tmp_path):
     summary = json.loads(stdout.splitlines()[-1])
     assert summary["event"] == "summary" and summary["samples"] == expected and summary["alarms"] == 0
     assert summary["rpm"] == pytest.approx(2500.0, rel=0.02)
+
+
+def test_a_stream_whose_rates_are_noise_is_said_blind(healthy_runs, tmp_path):
+    """At a rig's probe noise (0.5 um on a ~100 um orbit) the equation error's rates and
+    accelerations are noise: no block carries evidence (the disk's speed relative to the
+    shaft, nil on a synchronous whirl, never clears the rates' noise), nothing is identified
+    and no alarm can be raised.  Until 2026-11-29 the monitor said so nowhere: every
+    coefficient read 0 and "no alarm", as for a healthy rotor.  Now the status, the summary,
+    the live view's last lines and the report say it is blind, with the counts; the nearly
+    noise-free streams of the same rig (0.001 um) are not."""
+    from rotor_env.monitor.core import BLIND_SHARE
+
+    rig, _, paths = healthy_runs
+    mon = Monitor(ip=rig.ip)
+    for chunk in RigStream(paths[0], rig, NATURAL_RPM):
+        mon.update(chunk)
+    quiet = mon.summary()
+    assert quiet["blind"] == "" and quiet["informative_blocks"] >= BLIND_SHARE * quiet["blocks"] > 0
+
+    run = _healthy(rig, rpm_from=300.0, rpm_to=2500.0, rpm_per_s=400.0, noise=0.5, seed=11)
+    _write_csv(tmp_path / "noisy.csv", run.file_columns())
+    (tmp_path / "rig.yaml").write_text(ONE_PLANE)
+    out = _cli("monitor", "noisy.csv", "--rig", "rig.yaml", "--natural-rpm", f"{NATURAL_RPM:g}", "--json-lines",
+               "--status-every", "1", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    ev = [json.loads(x) for x in out.stdout.splitlines()]
+    s = ev[-1]
+    assert s["event"] == "summary" and s["alarms"] == 0
+    assert s["informative_blocks"] < BLIND_SHARE * s["blocks"] and s["blocks"] >= 20
+    assert s["blind"].startswith(f"blind: {s['informative_blocks']} of {s['blocks']} blocks carried evidence")
+    assert "not a healthy verdict" in s["blind"] and "rotor-id diagnose" in s["blind"]
+    # every coefficient stays at its start: nothing was identified
+    assert all(v == 0.0 for c in s["coefficients"].values() for v in c.values())
+    late = [e for e in ev if e["event"] == "status" and e["t_s"] > 2.0]
+    assert late and all(e.get("blind") for e in late)
+    # the human-readable end of the run says it too
+    text = _cli("monitor", "noisy.csv", "--rig", "rig.yaml", "--natural-rpm", f"{NATURAL_RPM:g}", cwd=tmp_path)
+    assert text.returncode == 0 and "not a healthy verdict" in " ".join(text.stdout.split())

@@ -72,6 +72,8 @@ class LiveView:
                 flag = "[green]yes[/green]" if st["significant"][name] else "no"
                 table.add_row(name, coef, flag, f"{st['cusum'][name]:.2f} / {mon.threshold:.2f}")
         parts: list[Any] = [table]
+        if st is not None and st.get("blind"):
+            parts.append(f"[bold yellow]{st['blind']}[/bold yellow]")
         if self.alarms:
             a = self.alarms[-1]
             parts.append(f"[bold red]latest alarm[/bold red]: {_alarm_line(a)}; {len(self.alarms)} alarm(s) so far")
@@ -94,6 +96,8 @@ class LiveView:
                                "incomplete block, or stopped by Ctrl-C): a saved state keeps them")
         for e in summary["events"]:
             self.console.print(f"  {alarm_words(e)} {e['event']} at {_when(e)}")
+        if summary.get("blind"):
+            self.console.print(f"[bold yellow]{summary['blind']}[/bold yellow]")
 
 
 def _values(values: dict) -> str:

@@ -32,10 +32,11 @@ def write_report(monitor, path, *, source: str, overwrite: bool = False, clock=N
         f"<tr><td>{esc(name)}</td><td>{esc(json.dumps(coef))}</td><td>{'yes' if s['significant'][name] else 'no'}"
         f"</td><td>{s['counted_blocks'][name]}</td></tr>" for name, coef in s["coefficients"].items())
     cfg = monitor.config
+    blind = f"<p><b>{esc(s['blind'])}</b></p>" if s.get("blind") else ""
     body = f"""<h1>On-line monitoring of {esc(source)}</h1>
 <p>{s['samples']} samples to {esc(end)}; equation-error noise floor
 {s['noise_floor']:.3g}. CUSUM per effect, threshold {s['threshold']:.3f} for a target in-control ARL of
-{cfg.arl0:g} samples (blocks of {cfg.block}); {s['alarms']} alarm(s).</p>
+{cfg.arl0:g} samples (blocks of {cfg.block}); {s['alarms']} alarm(s).</p>{blind}
 <h2>Alarms</h2><table><tr><th>event</th><th>effect</th><th>onset</th><th>alarm</th><th>before</th>
 <th>after</th><th>log10 p</th></tr>{rows}</table>
 <h2>Model at the end</h2><table><tr><th>effect</th><th>parameters</th><th>significant</th>
