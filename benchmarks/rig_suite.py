@@ -336,10 +336,17 @@ def _diagnose_table(record, rig_path: Path, folder: Path) -> dict:
     diagnosed as ``rotor-id diagnose TABLE --vectors --rig RIG`` does, in the waveform
     diagnosis's JSON shape (``parameters``: effect -> values)."""
     from rotor_env.batch import diagnose_file
+    from rotor_env.diagnosis.from_vectors import diagnose_vectors
 
-    path = folder / "vectors.csv"
-    record.vectors((1, 2)).to_csv(path, phase="lag")
-    d = diagnose_file(path, vectors=True, rig=rig_path).to_dict()
+    if record.rig.model == "tilt":
+        # a two-plane rig's table is the disk's tilt (urad, along the model's axes), which no
+        # DAQ writes and no table file holds (``rotor-id simulate --vectors`` refuses it):
+        # diagnosed as the Python API does, with the rig's inertia ratio
+        d = diagnose_vectors(record.vectors((1, 2)), ip=record.rig.ip).to_dict()
+    else:
+        path = folder / "vectors.csv"
+        record.vectors((1, 2)).to_csv(path, phase="lag")
+        d = diagnose_file(path, vectors=True, rig=rig_path).to_dict()
     d["parameters"] = {e: {"values": v} for e, v in (d.get("physical") or {}).items()}
     d["vectors"] = {"missing": d.get("missing"), "verdict": d.get("verdict")}
     return d

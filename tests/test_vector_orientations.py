@@ -180,3 +180,26 @@ def test_a_crack_under_an_impossible_load_is_not_plausible(rig):
     huge = replace(fit, forcing={**fit.forcing, SIDE_LOAD: load / np.hypot(*load[:2]) * 3 * MAX_SAG_RATIO * peak})
     ok, why = _plausible(huge, "asymmetry")
     assert not ok and "static deflection" in why
+
+
+def test_a_two_plane_records_table_is_the_tilts_with_its_geometry():
+    """The rig suite's two-plane records diagnosed from their 1X/2X tables (``--vectors``):
+    the table of a tilt rig is the disk's tilt in urad along the model's axes, which no table
+    file holds (``rotor-id simulate --vectors`` refuses it).  Written to CSV and read back, its
+    columns were read as two probes in the rig's displacement unit without their angles: a
+    bow's table failed (25746 "um" beyond a probe's range) and a runout's was named a bow.
+    Diagnosed as the Python API does, with the rig's inertia ratio, the supports' anisotropy
+    of record #23 (seed 6, 0.5 um) is named with its axis."""
+    import sys
+    from dataclasses import replace
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import rig_suite as rs
+
+    spec = replace(next(s for s in rs.build_specs((0.5,), rs.KINDS, 4, 6) if s.index == 23), vectors=True)
+    assert (spec.fault, spec.rig) == ("support_anisotropy", "two-plane")
+    o = rs.run_record(spec)
+    assert "error" not in o, o
+    assert o["named"] == ["support_anisotropy"], o
+    assert "support_axis" in o["parameters"]["support_anisotropy"]["values"]

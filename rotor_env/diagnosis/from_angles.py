@@ -75,7 +75,7 @@ def needs_output_error(meas: Measurements) -> bool:
 def angle_grid(meas: Measurements, ip: float) -> ShootingGrid:
     """The record on the output-error grid, the spin from a least-squares spline through the
     angle's whole turns (a noisy or quantised angle's speed is not differentiated)."""
-    from .from_rig import smooth_spin
+    from ..measurements.keyphasor import smooth_spin
 
     # the whole turns are found on the running maximum: a noisy angle may step back a little
     phi_s, speed = smooth_spin(meas.t, np.maximum.accumulate(meas.phi))

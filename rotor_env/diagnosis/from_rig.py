@@ -69,6 +69,7 @@ import numpy as np
 from ..effects import EFFECTS
 from ..measurements.artefacts import remove_artefacts
 from ..measurements.drift import drift_knot_spacing, drift_note, probe_drift, remove_drift
+from ..measurements.keyphasor import smooth_spin
 from ..measurements.rig import SPEED_UNITS
 from ..measurements.waveforms import LENGTH_UNIT, RigRecord, WaveformError
 from ..results import Result
@@ -869,52 +870,3 @@ def waveform_grid(record: RigRecord, w_ref: float) -> tuple[ShootingGrid, float]
                                     record.u[keep] / scale, record.rig.ip, noise_std=max(sigma / scale, 1e-15),
                                     noise_rho=rho, baseline_spacing=spacing if spacing > 0 else None)
     return grid, scale
-
-
-#: revolutions between two knots of the spin's least-squares spline: the candidates, the
-#: one with the smallest BIC over the pulse times is taken.  The long spacings matter where a
-#: keyphasor edge is sharper than a sample: at 2.5 kHz and 5000 rpm each pulse jitters by up
-#: to 60 mrad, and a steady run-up is one cubic over hundreds of revolutions (with 64 as the
-#: longest, a misaligned rotor at 0.1 um kept 4 % of the noise floor's RMS above it, and a
-#: 0.03 % stiffness asymmetry was named to fit that 1X)
-SPIN_KNOT_REVOLUTIONS = (4, 8, 16, 32, 64, 128, 256)
-
-
-def smooth_spin(t: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The spin angle and speed from a least-squares cubic spline through the pulse times.
-
-    The keyphasor's angle interpolates each pulse's time, and a pulse time is only known to a
-    fraction of a sample (an edge that rises within one or two samples): at a few thousand
-    rpm and 10 kHz that is a few mrad of angle, which the model turns into a 1X error of a few
-    mrad times the response — above the noise of a good probe.  The output-error fit needs the
-    angle of a shaft whose speed changes smoothly over a run-up or coast-down: a least-squares
-    spline with a knot every few revolutions averages the pulses' timing errors and keeps the
-    speed's course.  The knot spacing is chosen among :data:`SPIN_KNOT_REVOLUTIONS` by the
-    Bayesian information criterion of the pulse angles (a speed that changes faster than a
-    spacing — a torsional oscillation, a trip — keeps the finer ones)."""
-    from scipy.interpolate import make_lsq_spline
-
-    turns = np.arange(math.ceil(phi[0] / (2 * math.pi)), math.floor(phi[-1] / (2 * math.pi)) + 1)
-    if len(turns) < 4 * SPIN_KNOT_REVOLUTIONS[0]:
-        return phi, np.gradient(phi, t)
-    edges = np.interp(2 * math.pi * turns, phi, t)
-    # the record's ends pin the spline beyond the first and last pulse (the angle there)
-    x = np.concatenate([[t[0]], edges, [t[-1]]])
-    y = np.concatenate([[phi[0]], 2 * math.pi * turns, [phi[-1]]])
-    best, best_bic = None, math.inf
-    for every in SPIN_KNOT_REVOLUTIONS:
-        if len(turns) < 3 * every:
-            break
-        inner = edges[every:-every:every]
-        knots = np.concatenate([[t[0]] * 4, inner, [t[-1]] * 4])
-        try:
-            spl = make_lsq_spline(x, y, knots, k=3)
-        except (ValueError, np.linalg.LinAlgError):
-            continue
-        rss = float(np.sum((spl(x) - y) ** 2))
-        bic = len(x) * math.log(max(rss / len(x), 1e-300)) + (len(inner) + 4) * math.log(len(x))
-        if bic < best_bic:
-            best, best_bic = spl, bic
-    if best is None:
-        return phi, np.gradient(phi, t)
-    return best(t), best(t, 1)

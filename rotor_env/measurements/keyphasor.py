@@ -37,8 +37,8 @@ from collections.abc import Callable
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-__all__ = ["KeyphasorError", "KeyphasorTracker", "check_once_per_turn", "check_periods", "order_amplitudes",
-           "pulse_edges", "spin_from_pulses"]
+__all__ = ["SPIN_KNOT_REVOLUTIONS", "KeyphasorError", "KeyphasorTracker", "check_once_per_turn", "check_periods",
+           "order_amplitudes", "pulse_edges", "smooth_spin", "spin_from_pulses"]
 
 MIN_PULSES = 5
 #: a revolution this much longer (shorter) than its neighbours is a missed (extra) pulse
@@ -422,3 +422,60 @@ class KeyphasorTracker:
         p = self._held_p.shape[1] if self._held_p is not None else 0
         z = np.zeros(0)
         return z, z, z, z, np.zeros((0, p)), np.zeros(0, dtype=np.int64)
+
+
+#: revolutions between two knots of the spin's least-squares spline: the candidates, the
+#: one with the smallest BIC over the pulse times is taken.  The long spacings matter where a
+#: keyphasor edge is sharper than a sample: at 2.5 kHz and 5000 rpm each pulse jitters by up
+#: to 60 mrad, and a steady run-up is one cubic over hundreds of revolutions (with 64 as the
+#: longest, a misaligned rotor at 0.1 um kept 4 % of the noise floor's RMS above it, and a
+#: 0.03 % stiffness asymmetry was named to fit that 1X)
+SPIN_KNOT_REVOLUTIONS = (4, 8, 16, 32, 64, 128, 256)
+
+
+def smooth_spin(t: np.ndarray, phi: np.ndarray, *, with_error: bool = False):
+    """The spin angle and speed from a least-squares cubic spline through the pulse times.
+
+    The keyphasor's angle interpolates each pulse's time, and a pulse time is only known to a
+    fraction of a sample (an edge that rises within one or two samples): at a few thousand
+    rpm and 10 kHz that is a few mrad of angle, which the model turns into a 1X error of a few
+    mrad times the response — above the noise of a good probe.  The output-error fit needs the
+    angle of a shaft whose speed changes smoothly over a run-up or coast-down: a least-squares
+    spline with a knot every few revolutions averages the pulses' timing errors and keeps the
+    speed's course.  The knot spacing is chosen among :data:`SPIN_KNOT_REVOLUTIONS` by the
+    Bayesian information criterion of the pulse angles (a speed that changes faster than a
+    spacing — a torsional oscillation, a trip — keeps the finer ones).
+
+    ``with_error``: also the RMS error (rad) of the smoothed angle, ``None`` where it was
+    not smoothed: the spline's RMS misfit at the pulses (their angle jitter about it) times
+    ``sqrt(p / n)`` (the mean prediction variance of a least-squares fit with ``p``
+    coefficients to ``n`` points).  A simulated run through 725-5220 rpm with 1 % keyphasor
+    ramps (``rig_simulation``): the per-revolution angle error 26 mrad raw, 2.2-3.9 mrad
+    smoothed at 2.5 kHz; 7.7 and 0.47 mrad at 5 kHz; 0.7 and 0.07-0.12 mrad at 10 kHz."""
+    from scipy.interpolate import make_lsq_spline
+
+    turns = np.arange(math.ceil(phi[0] / (2 * math.pi)), math.floor(phi[-1] / (2 * math.pi)) + 1)
+    if len(turns) < 4 * SPIN_KNOT_REVOLUTIONS[0]:
+        return (phi, np.gradient(phi, t), None) if with_error else (phi, np.gradient(phi, t))
+    edges = np.interp(2 * math.pi * turns, phi, t)
+    # the record's ends pin the spline beyond the first and last pulse (the angle there)
+    x = np.concatenate([[t[0]], edges, [t[-1]]])
+    y = np.concatenate([[phi[0]], 2 * math.pi * turns, [phi[-1]]])
+    best, best_bic, best_err = None, math.inf, None
+    for every in SPIN_KNOT_REVOLUTIONS:
+        if len(turns) < 3 * every:
+            break
+        inner = edges[every:-every:every]
+        knots = np.concatenate([[t[0]] * 4, inner, [t[-1]] * 4])
+        try:
+            spl = make_lsq_spline(x, y, knots, k=3)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        rss = float(np.sum((spl(x) - y) ** 2))
+        bic = len(x) * math.log(max(rss / len(x), 1e-300)) + (len(inner) + 4) * math.log(len(x))
+        if bic < best_bic:
+            best, best_bic = spl, bic
+            best_err = math.sqrt(rss / len(x) * (len(inner) + 4) / len(x))
+    if best is None:
+        return (phi, np.gradient(phi, t), None) if with_error else (phi, np.gradient(phi, t))
+    return (best(t), best(t, 1), best_err) if with_error else (best(t), best(t, 1))

@@ -27,7 +27,13 @@ from pathlib import Path
 import numpy as np
 
 from .core import COLUMNS, Measurements
-from .keyphasor import KeyphasorError, check_once_per_turn, pulse_edges, spin_from_pulses
+from .keyphasor import (
+    KeyphasorError,
+    check_once_per_turn,
+    pulse_edges,
+    smooth_spin,
+    spin_from_pulses,
+)
 from .probes import to_model_axes
 from .rig import SPEED_UNITS, TIME_UNITS, Rig
 from .vectors import VectorTable, keyphasor_phase_error, order_track
@@ -79,10 +85,15 @@ class RigRecord:
         # is already fine, and four times its length would not fit)
         per_turn = 2 * math.pi / max(float(np.max(np.diff(self.phi))), 1e-12)
         up = int(np.clip(math.ceil(64.0 / per_turn), 1, 4))
-        tr = order_track(self.t, X, self.phi, orders, revolutions, upsample=up)
+        # tracked on the spin smoothed through the pulse times (a least-squares spline, its knots
+        # a few to hundreds of revolutions apart): a keyphasor edge sharper than a sample puts
+        # tens of milliradians into each pulse's angle at a few kHz, which every vector carries
+        # times its amplitude (2.6 um on a 100 um peak at 2.5 kHz); smoothed, a tenth of that
+        phi, _, error = smooth_spin(self.t, self.phi, with_error=True)
+        tr = order_track(self.t, X, phi, orders, revolutions, upsample=up)
         return VectorTable(speed=tr.speed, t=tr.t, probes=names, vectors=tr.vectors, amp_unit=unit,
                            angles=angles, source=self.source, notes=self.notes,
-                           phase_error_rad=keyphasor_phase_error(self.t, self.phi))
+                           phase_error_rad=keyphasor_phase_error(self.t, self.phi) if error is None else error)
 
     def compensate_runout(self, runout: dict[str, complex] | None = None, below_rpm: float | None = None) -> RigRecord:
         """Subtract the probes' runout: a 1X vector per probe (``lead``), or the slow-roll
