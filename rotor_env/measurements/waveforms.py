@@ -85,11 +85,7 @@ class RigRecord:
         # is already fine, and four times its length would not fit)
         per_turn = 2 * math.pi / max(float(np.max(np.diff(self.phi))), 1e-12)
         up = int(np.clip(math.ceil(64.0 / per_turn), 1, 4))
-        # tracked on the spin smoothed through the pulse times (a least-squares spline, its knots
-        # a few to hundreds of revolutions apart): a keyphasor edge sharper than a sample puts
-        # tens of milliradians into each pulse's angle at a few kHz, which every vector carries
-        # times its amplitude (2.6 um on a 100 um peak at 2.5 kHz); smoothed, a tenth of that
-        phi, _, error = smooth_spin(self.t, self.phi, with_error=True)
+        phi, error = self.tracking_spin()
         tr = order_track(self.t, X, phi, orders, revolutions, upsample=up)
         return VectorTable(speed=tr.speed, t=tr.t, probes=names, vectors=tr.vectors, amp_unit=unit,
                            angles=angles, source=self.source, notes=self.notes,
@@ -131,6 +127,16 @@ class RigRecord:
         u, v = to_model_axes(self.rig, new)
         return replace(self, readings=new, u=u, v=v, notes=(*self.notes, note))
 
+    def tracking_spin(self) -> tuple[np.ndarray, float | None]:
+        """The spin angle the vectors are tracked on, and its RMS error (rad; ``None`` where the
+        record is too short to smooth): the least-squares spline through the pulse times
+        (:func:`~.keyphasor.smooth_spin`, its knots a few to hundreds of revolutions apart).  A
+        keyphasor edge sharper than a sample puts tens of milliradians into each pulse's angle
+        at a few kHz, which every vector carries times its amplitude (2.6 um on a 100 um peak at
+        2.5 kHz); smoothed, a tenth of that."""
+        phi, _, error = smooth_spin(self.t, self.phi, with_error=True)
+        return phi, error
+
     def minus_1x(self, t: np.ndarray, vectors: dict[str, np.ndarray], note: str) -> RigRecord:
         """The record without a 1X response that changes along it: ``vectors`` per channel of
         :meth:`vectors` (a probe, in the rig's unit, or ``tilt_u``/``tilt_v`` in urad; ``lead``:
@@ -140,6 +146,10 @@ class RigRecord:
         planes' translations shared it (the model, the vectors and the noise read the tilt)."""
         from scipy.interpolate import CubicSpline
 
+        # the angle :meth:`vectors` tracks on: a 1X taken away on another angle leaves the
+        # difference (0.6 % of a second mode's peak at 2.5 kHz)
+        phi, _ = self.tracking_spin()
+
         def at_samples(X: np.ndarray) -> np.ndarray:
             X = np.asarray(X, dtype=complex)
             # cubic between the revolutions: through a resonance the vector turns by tens of
@@ -147,7 +157,7 @@ class RigRecord:
             # (2 % of the response, 4x the noise at 0.5 um, on a second mode of 46 um)
             tt = np.clip(self.t, t[0], t[-1])
             inside = CubicSpline(t, X)(tt) if len(t) >= 4 else np.interp(tt, t, X.real) + 1j * np.interp(tt, t, X.imag)
-            return np.real(inside * np.exp(1j * self.phi))
+            return np.real(inside * np.exp(1j * phi))
 
         if self.rig.model == "tilt":
             u = self.u - 1e-6 * at_samples(vectors["tilt_u"])
