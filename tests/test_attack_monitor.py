@@ -164,14 +164,20 @@ def test_ctrl_c_on_a_busy_monitor_summarises_what_its_state_holds(tmp_path, long
             first = proc.stdout.readline()
             time.sleep(0.05)  # most of the time goes into the monitor's steps
         else:  # the pipe full (64 KiB): the monitor waits in a write
+            # the writer is blocked once the pipe's content stops growing near its capacity: a
+            # pipe fills by pages, so how full it stops depends on the lines' length (a fixed
+            # 60000 bytes was never reached once the status lines grew: 56542, a 90 s wait)
             first = b""
             deadline = time.monotonic() + 90
+            held, still = -1, 0
             while time.monotonic() < deadline and proc.poll() is None:
-                n = fcntl.ioctl(proc.stdout.fileno(), termios.FIONREAD, b"\0\0\0\0")
-                if int.from_bytes(n, sys.byteorder) >= 60000:
+                n = int.from_bytes(fcntl.ioctl(proc.stdout.fileno(), termios.FIONREAD, b"\0\0\0\0"), sys.byteorder)
+                still = still + 1 if n == held else 0
+                held = n
+                if n >= 32768 and still >= 10:
                     break
                 time.sleep(0.02)
-            time.sleep(0.2)
+            assert proc.poll() is None and held >= 32768, "the monitor's writes never blocked on the full pipe"
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=60)
     finally:
