@@ -32,9 +32,11 @@ statistic on each effect's parameters).
 It is information, not a verdict.  In a sweep time and speed go together, so a parameter that
 depends on speed (a cross-coupling reads as a damping ``c - q/w``) is a "change" too, and the 1X
 terms carry the instrument's spin-angle and runout errors: on the rig suite's constant rotors
-(``benchmarks/rig_suite.py``) most "not the same" are cross-couplings, bows (read as runout,
-their trace drifts) and records at 2.5-5 kHz and 0.1 um, where the keyphasor's sampled edges
-put milliradians of error into the spin angle at top speed and the 1X terms drift with it.
+(``benchmarks/rig_suite.py``) most "not the same" are cross-couplings, bows the waveforms
+cannot tell from runout (their trace drifts) and records at 2.5-5 kHz, where the keyphasor's
+sampled edges put milliradians of error into the spin angle at top speed and the 1X terms
+drift with it.  A bow the 1X vectors name is tested with the bow in the model
+(``from_rig._constancy_of_the_verdict``): the model the record's verdict stands on.
 
 What it assumes: the model is right on each side of the break.  A model that misses an
 effect everywhere (a residual well above the floor) also makes the scores drift, so a
