@@ -481,7 +481,7 @@ class Monitor:
         changed" but "nothing can be told".  The usual cause is a rig's probe noise: the
         equation error needs the rates and accelerations of the displacements, and their noise
         swamps the relative speed of a synchronous whirl, which turns with the shaft (a
-        simulated healthy one-plane rig at 0.5 um: no block of 286 counted, and with the gate
+        simulated healthy one-plane rig at 0.5 um: no block of 285 counted, and with the gate
         off the identification read an asymmetry D = 9.5 and a negative damping)."""
         n = self.blocks
         if n < self.config.calibration_blocks or self.informative_blocks >= BLIND_SHARE * n:
