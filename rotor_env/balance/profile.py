@@ -81,6 +81,9 @@ class _IllConditioned(Exception):
 
 #: a magnitude interval is called unbounded beyond this many times the estimate
 _UNBOUNDED = 1e3
+#: an angle profile's optimum below this log of the radius (over the estimate's) has collapsed
+#: towards zero and does not start the next point
+_COLLAPSED_LOG_RADIUS = -5.0
 
 
 @dataclass
@@ -358,7 +361,11 @@ class JointUnbalance:
 
             def excess(d: float, sign: float = sign, warm: list = warm) -> float:
                 val, x = self._profile(j, shift, angle=a + sign * d, warm=warm[0])
-                warm[0] = x
+                # a point whose optimum collapsed towards zero radius (log-radius -20) is no
+                # start for the next: there the gradient is ~e^(log-radius), under the
+                # tolerance, and every later point stayed on that plateau (a low-SNR seed's
+                # angle bound read 49.88 deg where the profile crosses at 51.27)
+                warm[0] = x if x[0] > _COLLAPSED_LOG_RADIUS else None
                 return val - self.rss_min - crit
 
             found = _crossing(excess, min(guess, math.pi), math.pi, crit)
