@@ -223,32 +223,3 @@ def test_a_final_model_that_does_not_converge_is_run_on_and_said(monkeypatch):
     still = oe_diagnosis._run_on(worse, noise, notes)
     assert not still.converged and still.rss <= worse.rss
     assert len(notes) == 1 and "did not converge" in notes[0] and "do not hold" in notes[0]
-
-
-def test_other_crack_laws_are_not_started_from_a_crack_that_gave_up():
-    """The other crack laws are started from the best crack's side load and axis only where
-    that crack is a contender: when every crack of the round gave up against a better
-    candidate of another kind (a misalignment at the floor), nothing is fitted (a two-plane
-    misalignment record spent 17 of its 63 s there, both laws ending above the misalignment).
-    The control: a crack that did not give up has its side load's Wald test read."""
-    from types import SimpleNamespace
-
-    from rotor_env.diagnosis.oe_diagnosis import SIDE_LOAD, _crack_laws_from_lead
-
-    read = []
-
-    def wald(effect):
-        read.append(effect)
-        return 0.0, 2, 0.0  # not significant: nothing to start the other laws from
-
-    def crack(gave_up):
-        return SimpleNamespace(gave_up=gave_up, rss=1.0, wald=wald,
-                               effects=("stiffness", "unbalance", SIDE_LOAD, "asymmetry"))
-
-    # no grid, model or fit to fit with: any fit attempted would fail
-    fits = {"asymmetry": crack(True), "breathing_crack": crack(True)}
-    assert _crack_laws_from_lead(None, None, None, (), (), fits, list(fits), None) == {}
-    assert read == []
-    fits["asymmetry"] = crack(False)
-    assert _crack_laws_from_lead(None, None, None, (), (), fits, list(fits), None) == {}
-    assert read == [SIDE_LOAD]

@@ -455,11 +455,7 @@ def _crack_laws_from_lead(grid, screen_grid, screen_x0, model, lib, fits, keep, 
     the laws differ in how they read it.  ``{crack: fit}`` where the crack was screened out, or
     where this fit beats the one it had."""
     leads = [c for c in keep if c in fits and c in CRACKS and SIDE_LOAD in fits[c].effects]
-    if not leads or all(fits[c].gave_up for c in leads):
-        # every crack gave up against a better candidate of another kind (a misalignment's 2X
-        # at the floor): its side load and axis are a fit stopped short of a worse model, and
-        # the other laws started from them would be too (a two-plane misalignment record
-        # spent 17 of its 63 s there, both laws ending above the misalignment)
+    if not leads:
         return {}
     lead = min(leads, key=lambda c: fits[c].rss)
     lead_fit = fits[lead]
