@@ -441,7 +441,8 @@ _SMALL_START = {"asymmetry": {"D": 0.005}, "breathing_crack": {"dk_crack": 0.02,
                 "hinge_crack": {"dk_hinge": 0.02}, "support_anisotropy": {"support_anisotropy": 0.01}}
 
 
-def _crack_laws_from_lead(grid, screen_grid, screen_x0, model, lib, fits, keep, current) -> dict:
+def _crack_laws_from_lead(grid, screen_grid, screen_x0, model, lib, fits, keep, current,
+                          best_rss: float | None = None, floor: float = 0.0) -> dict:
     """Each other crack law started from the side load and the axis the best crack of the round
     found: the best of four axes (the lead's, turned by quarter turns) after the screening's
     steps, fitted to convergence.
@@ -484,7 +485,11 @@ def _crack_laws_from_lead(grid, screen_grid, screen_x0, model, lib, fits, keep, 
                 best = f
         if best is None:
             continue
-        full = _converge(grid, m, c, best, current.x0)
+        # like the round's candidates: a law that cannot come near the best fit of the round
+        # gives up (its fit then judged at its optimum only where a decision reads it)
+        level = (None if best_rss is None else best_rss * 1.001
+                 + 2.0 * _tie_level(len(best.values)) * floor * floor)
+        full = _converge(grid, m, c, best, current.x0, level)
         # a candidate screened out holds a fit of the screening grid's segments only
         if full is not None and (c not in keep or full.rss < fits[c].rss):
             out[c] = full
@@ -933,7 +938,7 @@ def diagnose_output_error(
             say(f"round {rnd}: {c} fitted (residual {fits[c].rms / floor:.3g}x the floor)"
                 + (" -- gave up: it cannot come down to the best" if full.gave_up else ""))
         for c, full in _crack_laws_from_lead(grid, screen_grid, screen_x0, cur_model, lib, fits, keep,
-                                             current).items():
+                                             current, best_rss, floor).items():
             fits[c] = full
             if c not in keep:
                 keep.append(c)
