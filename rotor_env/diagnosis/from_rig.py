@@ -76,7 +76,13 @@ from ..results import Result
 from .change import parameter_constancy
 from .from_vectors import VectorDiagnosis, diagnose_vectors
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES
-from .oe_diagnosis import CONVERGE_ITERATIONS, OutputErrorDiagnosis, diagnose_output_error
+from .oe_diagnosis import (
+    CONVERGE_ITERATIONS,
+    OutputErrorDiagnosis,
+    diagnose_output_error,
+    splits,
+    with_parts,
+)
 from .output_error import (
     TIME_UNIT_EFFECT,
     OutputErrorFit,
@@ -545,18 +551,25 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
     unit = record.rig.amp_unit if record.rig.model == "translation" else "urad"
 
     def waveforms(rec: RigRecord, w: float = w_ref, tried: Sequence[str] = cands,
-                  mode: SecondMode | None = None) -> OutputErrorDiagnosis:
+                  mode: SecondMode | None = None, split: bool = True) -> OutputErrorDiagnosis:
         grid, _ = waveform_grid(rec, w)
         return diagnose_output_error(replace(grid, second_mode=mode), list(model), list(tried), alpha=alpha,
-                                     unit_scale=unit_scale, unit=unit, progress=progress)
+                                     unit_scale=unit_scale, unit=unit, progress=progress, split=split)
 
-    plain = RigDiagnosis(record, vd, waveforms(record), w_ref)
-    explained = plain.verdict in ("explained", "explained_after_adding")
-    if ((not explained or plain.changed_parts is not None) and isinstance(plain.diagnosis, OutputErrorDiagnosis)
-            and plain.diagnosis.rms_ratio_after >= SECOND_MODE_MIN_RATIO):
-        # one mode does not explain the record, or only as two rotors either side of a break: a
-        # second mode in the waveforms' model, fitted with the record (module docstring), taken
-        # where it explains the record as one rotor -- the simpler reading
+    # the one-mode diagnosis, its two sides of a break (two rotors) left for later: where one
+    # mode misses the record by SECOND_MODE_MIN_RATIO, one rotor with two modes -- the simpler
+    # reading -- is tried first, and the two sides are diagnosed only where it is not taken (a
+    # two-disk record spent 41 of its 65 s diagnosing both sides of a "change" the second
+    # mode then explained)
+    one = waveforms(record, split=False)
+    two_first = isinstance(one, OutputErrorDiagnosis) and one.rms_ratio_after >= SECOND_MODE_MIN_RATIO
+    if not two_first:
+        one = with_parts(one, cands, alpha=alpha)
+    plain = RigDiagnosis(record, vd, one, w_ref)
+    if two_first:
+        # one mode does not explain the record (nor, perhaps, two rotors either side of a
+        # break): a second mode in the waveforms' model, fitted with the record (module
+        # docstring), taken where it explains the record as one rotor -- the simpler reading
         step("waveforms: a second mode in the waveforms' model")
         found, said = _second_mode(plain.diagnosis, vd.after, w_ref, alpha)
         if found is not None:
@@ -570,16 +583,20 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
                 one_rotor = getattr(two, "parts", None) is None or not two.parts.changed
                 if (two.verdict in ("explained", "explained_after_adding") and one_rotor
                         and two.rms_ratio_after < plain.diagnosis.rms_ratio_after):
-                    if explained:
+                    if plain.changed_parts is not None or splits(plain.diagnosis):
                         record = replace(record, notes=(*record.notes, (
-                            "the one-mode waveforms explained this record only as two rotors, either side of a "
-                            "break; with a second mode in the waveforms' model, one rotor explains it")))
+                            "the one-mode waveforms read this record only as two rotors, either side of a break "
+                            "(their parameters not the same over it); with a second mode in the waveforms' model, "
+                            "one rotor explains it")))
                     return RigDiagnosis(record, vd, two, w, modelled_mode_from=plain.diagnosis.rms_ratio_after)
                 ends.append(f"{two.verdict.replace('_', ' ')} at {two.rms_ratio_after:.3g}x the floor")
                 if one_rotor and (closest is None or two.rms_ratio_after < closest[1].rms_ratio_after):
                     closest = (w, two)
             said = f"{said}; with it the diagnosis ends {' and, the two modes exchanged, '.join(ends)}"
-            if (not explained and closest is not None
+            if closest is not None and closest[1].rms_ratio_after <= plain.diagnosis.rms_ratio_after / SECOND_MODE_CLOSER:
+                # whether one mode explains the record as two rotors decides between the readings
+                plain = replace(plain, diagnosis=with_parts(plain.diagnosis, cands, alpha=alpha))
+            if (closest is not None and plain.verdict not in ("explained", "explained_after_adding")
                     and closest[1].rms_ratio_after <= plain.diagnosis.rms_ratio_after / SECOND_MODE_CLOSER):
                 # neither reading explains the record, but one rotor with two modes comes far
                 # closer than one mode: that reading is the record's, not explained
@@ -591,7 +608,9 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
                                     modelled_mode_from=plain.diagnosis.rms_ratio_after)
             said = f"{said}: not taken"
         record = replace(record, notes=(*record.notes, said))
-        plain = replace(plain, record=record)
+        # no second mode taken: the one-mode reading with its two sides, where it splits
+        plain = replace(plain, record=record, diagnosis=with_parts(plain.diagnosis, cands, alpha=alpha))
+    explained = plain.verdict in ("explained", "explained_after_adding")
     if SECOND_MODE not in vd.missing or (explained and plain.changed_parts is None):
         return plain
     if explained and vd.verdict not in ("explained", "explained_after_adding"):

@@ -64,7 +64,7 @@ from .output_error import (
 )
 from .parts import RecordParts, absent_on_a_side, split_at_change
 
-__all__ = ["OutputErrorDiagnosis", "diagnose_output_error"]
+__all__ = ["OutputErrorDiagnosis", "diagnose_output_error", "splits", "with_parts"]
 
 #: residual RMS within this factor of the noise floor: explained
 EXPLAINED_RATIO = 1.1
@@ -1093,19 +1093,41 @@ def diagnose_output_error(
                             min_fall=RELEVANT_SHARE * _excess(current, floor, unc))
     say(f"detectability of {len(detect)} effects not named: "
         f"{sum(not d.decidable for d in detect.values())} cannot be decided")
-    parts = None
-    # two rotors in one record: the one model does not explain it and its parameters drift.
-    # A record one model explains is one rotor as far as its residual can tell: there the drift
-    # is reported, not diagnosed apart (each side would name what its own small misfit makes
-    # of an instrument's drift: a 2.5 kHz keyphasor's, say)
-    if split and change is not None and change.significant and current.rms / floor > EXPLAINED_RATIO:
-        step("waveforms: the record changed -- each side of the break diagnosed on its own")
+    diag = OutputErrorDiagnosis(tuple(model), cur_model, base, current, floor, tried, added, unit_scale, unit,
+                                time.perf_counter() - t_start, notes, detect, change, None)
+    if split and splits(diag):
         say(f"parameters not the same over the record (break at model time {change.t_break:.4g}): each side diagnosed")
-        parts = split_at_change(grid, change, current,
-                                lambda sub: diagnose_output_error(sub, model, candidates, alpha=alpha,
-                                                                  unit_scale=unit_scale, unit=unit, split=False))
-    return OutputErrorDiagnosis(tuple(model), cur_model, base, current, floor, tried, added, unit_scale, unit,
-                                time.perf_counter() - t_start, notes, detect, change, parts)
+        diag = with_parts(diag, candidates, alpha=alpha)
+    return diag
+
+
+def splits(diag: OutputErrorDiagnosis) -> bool:
+    """Whether ``diag`` reads as two rotors in one record, each side to be diagnosed on its own
+    (:func:`with_parts`): the one model does not explain it and its parameters drift.  A record
+    one model explains is one rotor as far as its residual can tell: there the drift is
+    reported, not diagnosed apart (each side would name what its own small misfit makes of an
+    instrument's drift: a 2.5 kHz keyphasor's, say)."""
+    change = diag.change
+    return change is not None and change.significant and diag.rms_ratio_after > EXPLAINED_RATIO
+
+
+def with_parts(diag: OutputErrorDiagnosis, candidates: Sequence[str], *, alpha: float = 0.05) -> OutputErrorDiagnosis:
+    """``diag`` with each side of its break diagnosed on its own (:mod:`.parts`), the same model
+    and ``candidates``; ``diag`` itself where it does not split (:func:`splits`).  Apart from
+    :func:`diagnose_output_error` so that a caller with a simpler reading to try first (one
+    rotor with two modes, :mod:`.from_rig`) pays for the two sides only where it needs them."""
+    from ..progress import step
+
+    if diag.parts is not None or not splits(diag):
+        return diag
+    step("waveforms: the record changed -- each side of the break diagnosed on its own")
+    t0 = time.perf_counter()
+    model = list(diag.model_before)
+    parts = split_at_change(diag.after.grid, diag.change, diag.after,
+                            lambda sub: diagnose_output_error(sub, model, list(candidates), alpha=alpha,
+                                                              unit_scale=diag.unit_scale, unit=diag.unit,
+                                                              split=False))
+    return replace(diag, parts=parts, seconds=diag.seconds + time.perf_counter() - t0)
 
 
 # ------------------------------------------------------------------ figures and report
