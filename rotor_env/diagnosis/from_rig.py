@@ -78,6 +78,7 @@ from .from_vectors import VectorDiagnosis, diagnose_vectors
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES
 from .oe_diagnosis import (
     CONVERGE_ITERATIONS,
+    EXPLAINED_RATIO,
     OutputErrorDiagnosis,
     diagnose_output_error,
     splits,
@@ -88,6 +89,7 @@ from .output_error import (
     OutputErrorFit,
     ShootingGrid,
     fit_output_error,
+    library_effects,
     noise_ar1_two_channels,
     noise_std_high_band,
 )
@@ -320,9 +322,6 @@ class RigDiagnosis(Result):
         into a 1X constant at every speed: runout and a bow to the 1X fit).  A shaft bow is
         named by the vectors only where it fits clearly better than probe runout, which one
         run seldom allows (``from_vectors._bow_or_runout``)."""
-        from .oe_diagnosis import EXPLAINED_RATIO
-        from .output_error import library_effects
-
         d = self.diagnosis
         if not isinstance(d, OutputErrorDiagnosis) or d.rms_ratio_after > EXPLAINED_RATIO or d.added:
             return []
@@ -596,16 +595,16 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
             if closest is not None and closest[1].rms_ratio_after <= plain.diagnosis.rms_ratio_after / SECOND_MODE_CLOSER:
                 # whether one mode explains the record as two rotors decides between the readings
                 plain = replace(plain, diagnosis=with_parts(plain.diagnosis, cands, alpha=alpha))
-            if (closest is not None and plain.verdict not in ("explained", "explained_after_adding")
-                    and closest[1].rms_ratio_after <= plain.diagnosis.rms_ratio_after / SECOND_MODE_CLOSER):
-                # neither reading explains the record, but one rotor with two modes comes far
-                # closer than one mode: that reading is the record's, not explained
-                record = replace(record, notes=(*record.notes, (
-                    f"{said}: not explained either way, but far closer than the one-mode model "
-                    f"({plain.diagnosis.rms_ratio_after:.3g}x the floor, {', '.join(plain.diagnosis.missing) or 'nothing'} "
-                    "named): one rotor with two modes is this record's reading")))
-                return RigDiagnosis(record, vd, closest[1], closest[0],
-                                    modelled_mode_from=plain.diagnosis.rms_ratio_after)
+                if plain.verdict not in ("explained", "explained_after_adding"):
+                    # neither reading explains the record, but one rotor with two modes comes far
+                    # closer than one mode: that reading is the record's, not explained
+                    record = replace(record, notes=(*record.notes, (
+                        f"{said}: not explained either way, but far closer than the one-mode model "
+                        f"({plain.diagnosis.rms_ratio_after:.3g}x the floor, "
+                        f"{', '.join(plain.diagnosis.missing) or 'nothing'} named): one rotor with two modes is "
+                        "this record's reading")))
+                    return RigDiagnosis(record, vd, closest[1], closest[0],
+                                        modelled_mode_from=plain.diagnosis.rms_ratio_after)
             said = f"{said}: not taken"
         record = replace(record, notes=(*record.notes, said))
         # no second mode taken: the one-mode reading with its two sides, where it splits
@@ -673,9 +672,6 @@ def check_by_waveforms(rd: RigDiagnosis, alpha: float = 0.05) -> RigDiagnosis:
     level (Bonferroni over those tried): significant, the waveforms confirm it; not, they
     refute it -- the waveforms hold the same 1X, and their model carries the probes'
     calibration, which the vectors' model lacks."""
-    from .oe_diagnosis import CONVERGE_ITERATIONS, EXPLAINED_RATIO
-    from .output_error import fit_output_error, library_effects
-
     d = rd.diagnosis
     if not isinstance(d, OutputErrorDiagnosis) or d.rms_ratio_after > EXPLAINED_RATIO or d.added:
         return rd
@@ -710,8 +706,6 @@ def _constancy_of_the_verdict(rd: RigDiagnosis, alpha: float) -> RigDiagnosis:
     over the record" in 4 of 4 records, their runout term "moved", where the rotor never
     changed.  The test is run again on the waveforms' model with those effects added (one
     fit, started at the final model's parameters)."""
-    from .oe_diagnosis import EXPLAINED_RATIO
-
     d = rd.diagnosis
     named = rd.named_by_vectors
     if not named or not isinstance(d, OutputErrorDiagnosis) or d.change is None:
