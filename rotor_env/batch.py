@@ -3,14 +3,16 @@
 The engine both commands share (the CLI parses the arguments, :mod:`rotor_env.fleet`
 maps this over a fleet of recordings): :func:`diagnose_file` picks the reader and the
 diagnosis from the kind of file, :func:`model_list` reads a ``--model`` text,
-:func:`inertia_ratio` checks an ``--ip`` value.  Errors are :class:`ValueError` with a
-message that names the option and the value.
+:func:`inertia_ratio` checks an ``--ip`` value, :func:`table_amplitude_unit` an ``--amp-unit``,
+and :func:`argparse_type` turns either into an argparse type whose errors are usage errors.
+Errors are :class:`ValueError` with a message that names the option and the value.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 
 def inertia_ratio(text: str) -> float:
@@ -22,6 +24,28 @@ def inertia_ratio(text: str) -> float:
     if not (math.isfinite(value) and 0 <= value < 1):
         raise ValueError(f"{text!r}: the inertia ratio I_p/I_t must be a number in [0, 1)")
     return value
+
+
+def table_amplitude_unit(text: str) -> str:
+    """``--amp-unit``: a table's amplitude unit, optionally with its measure (``um``, ``mil pp``,
+    ``um-rms``: :func:`~rotor_env.measurements.vectors.amplitude_unit`), returned as given."""
+    from .measurements.vectors import amplitude_unit
+
+    amplitude_unit(text)
+    return text
+
+
+def argparse_type(check: Callable[[str], object]) -> Callable[[str], object]:
+    """``check`` as an argparse ``type=``: its :class:`ValueError` message becomes the usage
+    error (argparse would otherwise print only "invalid value")."""
+    def parse(text: str):
+        try:
+            return check(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    parse.__name__ = check.__name__
+    return parse
 
 
 def model_list(text: str | None, default: Sequence[str]) -> list[str]:

@@ -7,7 +7,7 @@ import math
 import sys
 from collections.abc import Sequence
 
-from .batch import diagnose_file, inertia_ratio, model_list
+from .batch import argparse_type, diagnose_file, inertia_ratio, model_list, table_amplitude_unit
 
 
 def _cmd_identifier_demo(args: argparse.Namespace) -> int:
@@ -47,14 +47,6 @@ def _parse_number(text: str, what: str) -> float:
         return float(text)
     except ValueError:
         raise _UsageError(f"{what}: {text!r} is not a number") from None
-
-
-def _ip_value(text: str) -> float:
-    """``--ip`` for argparse (a bad value is reported as a usage error)."""
-    try:
-        return inertia_ratio(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _parse_set(items: Sequence[str]) -> dict[str, float]:
@@ -488,11 +480,11 @@ def _add_diagnose_parsers(sub) -> None:
                        help="comma-separated effects" + (" (default: unbalance,viscous_damping)" if cmd == "diagnose" else ""),
                        required=cmd == "fit")
         if cmd == "diagnose":
-            p.add_argument("--ip", type=_ip_value, default=None,
+            p.add_argument("--ip", type=argparse_type(inertia_ratio), default=None,
                            help="inertia ratio I_p/I_t (default: estimated from the data; a given one the "
                            "data contradict is kept, with a warning)")
         else:
-            p.add_argument("--ip", type=_ip_value, default=0.3, help="inertia ratio I_p/I_t (default 0.3)")
+            p.add_argument("--ip", type=argparse_type(inertia_ratio), default=0.3, help="inertia ratio I_p/I_t (default 0.3)")
         p.add_argument("--effect", action="append", metavar="MODULE:NAME",
                        help="a user effect: a column function or an Effect (repeatable)")
         p.add_argument("--json", action="store_true", help="print the result as one JSON object")
@@ -508,8 +500,10 @@ def _add_diagnose_parsers(sub) -> None:
                            "described by this rig file (docs/MEASUREMENTS.md)")
             g.add_argument("--vectors", action="store_true", help="FILE is an order-tracked table: rpm, amp, "
                            "phase_deg (or NAME_amp, NAME_phase_deg per probe), optional t")
-            g.add_argument("--amp-unit", default="um", choices=("um", "mil", "mm", "m"),
-                           help="amplitude unit of the table (default um)")
+            g.add_argument("--amp-unit", default="um", type=argparse_type(table_amplitude_unit),
+                           help="amplitude unit of the table: um, mil, mm or m, and how it is measured when not "
+                                "zero to peak: 'mil pp' (peak to peak, the usual proximity-probe display), "
+                                "'um rms' (default um, zero to peak)")
             g.add_argument("--phase", default="lag", choices=("lag", "lead"),
                            help="phase convention: lag = instrument x = A cos(phi - phase) (default), "
                                 "lead = angle of X with x = Re(X e^{i phi})")

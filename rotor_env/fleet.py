@@ -32,6 +32,7 @@ from collections import Counter
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from .batch import argparse_type, inertia_ratio, table_amplitude_unit
 from .outputs import atomic_write
 from .ray_cluster import init_ray, stop_ray
 
@@ -485,15 +486,6 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     return 1 if result["summary"]["errors"] and not result["summary"]["ok"] else 0
 
 
-def _ip_value(text: str) -> float:
-    """``--ip`` for argparse (a bad value is reported as a usage error)."""
-    from .batch import inertia_ratio
-
-    try:
-        return inertia_ratio(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
 
 def add_batch_parser(sub) -> None:
     p = sub.add_parser(
@@ -510,13 +502,15 @@ def add_batch_parser(sub) -> None:
     p.add_argument("--address", metavar="ADDR", help="an existing Ray cluster ('auto', or ray://HOST:10001); "
                    "every node needs rotor-id installed")
     p.add_argument("--model", metavar="A,B,...", help="the model to start from (default: as 'rotor-id diagnose')")
-    p.add_argument("--ip", type=_ip_value, default=None, help="inertia ratio I_p/I_t (default: estimated)")
+    p.add_argument("--ip", type=argparse_type(inertia_ratio), default=None, help="inertia ratio I_p/I_t (default: estimated)")
     p.add_argument("--alpha", type=float, default=0.05, help="significance level (default 0.05)")
     p.add_argument("--slow-roll", type=float, default=None, metavar="SPEED", help="slow-roll compensation")
     p.add_argument("--vectors", action="store_true", help="the recordings are order-tracked 1X tables")
     p.add_argument("--rig", metavar="RIG.yaml", help="the recordings are this rig's raw waveforms (or, with "
                    "--vectors, its probes' tables)")
-    p.add_argument("--amp-unit", default="um", choices=("um", "mil", "mm", "m"), help="--vectors amplitude unit")
+    p.add_argument("--amp-unit", default="um", type=argparse_type(table_amplitude_unit),
+                   help="--vectors amplitude unit (um, mil, mm, m; 'mil pp' for peak to peak, 'um rms'; default um, "
+                        "zero to peak)")
     p.add_argument("--phase", default="lag", choices=("lag", "lead"), help="--vectors phase convention")
     p.add_argument("--id-column", default=DEFAULT_ID_COLUMN, help="the recording id column of a Parquet dataset "
                    f"(default {DEFAULT_ID_COLUMN})")

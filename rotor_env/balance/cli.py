@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..batch import argparse_type, table_amplitude_unit
+
 __all__ = ["add_balance_parser"]
 
 
@@ -20,7 +22,8 @@ def add_balance_parser(sub) -> None:
     )
     p.add_argument("table", metavar="TABLE", help="1X vector table with a run column (.csv or .parquet)")
     p.add_argument("--runs", required=True, metavar="RUNS.yaml", help="planes, reference run, trial weights")
-    p.add_argument("--amp-unit", default="um", choices=["um", "mil", "mm", "m"], help="amplitude unit (default um)")
+    p.add_argument("--amp-unit", default="um", type=argparse_type(table_amplitude_unit),
+                   help="amplitude unit (um, mil, mm, m; 'mil pp' for peak to peak, 'um rms'; default um, zero to peak)")
     p.add_argument("--phase", default="lag", choices=["lag", "lead"],
                    help="phase convention of the table; weight angles are counted the same way (default lag)")
     p.add_argument("--rig", metavar="RIG.yaml", help="probe angles for the model-based unbalance (optional)")

@@ -47,6 +47,7 @@ __all__ = [
     "OrderTrack",
     "VectorTable",
     "VectorTableError",
+    "amplitude_unit",
     "fit_orders",
     "from_phase",
     "keyphasor_phase_error",
@@ -59,6 +60,13 @@ __all__ = [
 
 #: amplitude unit -> metres (V and mV need a sensitivity; see the rig description)
 AMPLITUDE_UNITS: dict[str, float] = {"um": 1e-6, "µm": 1e-6, "mil": 25.4e-6, "mm": 1e-3, "m": 1.0}
+#: how a table's amplitude is measured -> the factor to the vector's modulus (zero to peak, the
+#: package's ``|X|``).  Displacement from proximity probes is customarily given peak to peak
+#: (API 670; Bently Nevada's and ADRE's 1X tables: "mil pp", "um pp"), sometimes as an RMS; an
+#: amplitude read as zero to peak when it is peak to peak doubles every size the diagnosis reports
+#: (the unbalance in g mm, the bow, the runout, the noise floor) while the criticals, the damping
+#: and a crack's relative stiffness, ratios of amplitudes, stay the same.
+AMPLITUDE_MEASURES: dict[str, float] = {"pk": 1.0, "pp": 0.5, "rms": math.sqrt(2.0)}
 #: speed unit -> rad/s
 SPEED_UNITS: dict[str, float] = {"rpm": 2.0 * math.pi / 60.0, "rad/s": 1.0, "hz": 2.0 * math.pi}
 
@@ -101,6 +109,28 @@ def from_phase(amp: np.ndarray, phase_deg: np.ndarray, convention: str = "lag") 
     _check_convention(convention)
     ang = np.radians(phase_deg)
     return np.asarray(amp, dtype=float) * np.exp(-1j * ang if convention == "lag" else 1j * ang)
+
+
+def amplitude_unit(text: str) -> tuple[str, str]:
+    """``"mil pp"``, ``"um-pp"``, ``"um_rms"``, ``"m 0-pk"``, ``"mm"`` -> (unit, measure): a unit of
+    :data:`AMPLITUDE_UNITS` and a measure of :data:`AMPLITUDE_MEASURES` (zero to peak, ``pk``,
+    when none is given).  A clear error names what is accepted."""
+    raw = str(text).strip()
+    head, _, rest = raw.replace("-", " ", 1).replace("_", " ", 1).partition(" ")
+    unit = head if head == "µm" else head.lower()
+    key = "".join(c for c in rest.lower() if c not in " -_")
+    measure = _MEASURE_NAMES.get(key)
+    if unit not in AMPLITUDE_UNITS or measure is None:
+        raise VectorTableError(
+            f"--amp-unit {raw!r}: expected one of {', '.join(AMPLITUDE_UNITS)}, optionally followed by how the "
+            f"amplitude is measured ({', '.join(AMPLITUDE_MEASURES)}; e.g. 'mil pp' or 'um-pp'; default pk, zero to "
+            "peak); volts: convert with the probe sensitivity in the rig description")
+    return unit, measure
+
+
+#: the spellings of a measure (spaces, hyphens and underscores dropped, lower case)
+_MEASURE_NAMES = {"": "pk", "pk": "pk", "0pk": "pk", "0p": "pk", "peak": "pk", "zerotopeak": "pk",
+                  "pp": "pp", "pkpk": "pp", "peaktopeak": "pp", "rms": "rms"}
 
 
 def _check_convention(convention: str) -> None:
@@ -427,8 +457,12 @@ def load_vector_table(
 ) -> VectorTable:
     """Read an order-tracked table: ``rpm`` (or ``speed``), optional ``t``, and per probe
     ``amp``/``phase_deg`` (one probe) or ``NAME_amp``/``NAME_phase_deg``; 2X and 3X as
-    ``..._amp_2x``/``..._phase_deg_2x``.  ``angles``: probe name -> mounting angle in
-    degrees (from the rig description).  Errors name the file, column, line and value.
+    ``..._amp_2x``/``..._phase_deg_2x``.  ``amp_unit``: a unit of :data:`AMPLITUDE_UNITS`,
+    optionally with how the amplitude is measured (``"mil pp"``: peak to peak, halved here;
+    ``"um rms"``; zero to peak by default: :func:`amplitude_unit`) -- the table holds zero-to-peak
+    vectors in the bare unit, and its notes say what was converted.  ``angles``: probe name ->
+    mounting angle in degrees (from the rig description).  Errors name the file, column, line
+    and value.
 
     ``run_column`` (a balancing campaign, :mod:`rotor_env.balance`): that column labels
     every row with its run (text or numbers); the rows stay in file order (one run's rows
@@ -439,9 +473,9 @@ def load_vector_table(
 
     path = Path(path)
     _check_convention(phase)
-    if amp_unit not in AMPLITUDE_UNITS:
-        raise VectorTableError(f"--amp-unit {amp_unit!r}: not one of {', '.join(AMPLITUDE_UNITS)} "
-                               "(volts: convert with the probe sensitivity in the rig description)")
+    amp_unit, measure = amplitude_unit(amp_unit)
+    to_peak = AMPLITUDE_MEASURES[measure]
+    unit_text = amp_unit if measure == "pk" else f"{amp_unit} {measure}"  # as the file gives it
     labels: dict[int, str] | None = None
     try:
         if run_column is None:
@@ -509,8 +543,13 @@ def load_vector_table(
     if float(rpm.max() - rpm.min()) <= 1e-9 * float(rpm.max()):
         raise VectorTableError(f"{path}, column {header[col[speed_col]]!r}: the speed is {_num(rpm[0])} rpm on every "
                                "row; a run-up or coast-down (changing speed) is needed to see a resonance")
-    metres = AMPLITUDE_UNITS[amp_unit]
+    # the limits are on the zero-to-peak amplitude, the same whatever the file's measure
+    metres = AMPLITUDE_UNITS[amp_unit] * to_peak
     notes: list[str] = []
+    if measure != "pk":
+        notes.append(f"the table's amplitudes are {'peak to peak' if measure == 'pp' else 'RMS'} ({amp_unit} "
+                     f"{measure}): read as zero to peak ({'halved' if measure == 'pp' else 'times sqrt 2'}); "
+                     f"every amplitude reported is zero to peak in {amp_unit}")
     for v in probes.values():
         amp = data[:, v[1][0]]
         if (amp < 0).any():
@@ -522,14 +561,14 @@ def load_vector_table(
         if big.any():
             r = int(np.argmax(big))
             raise VectorTableError(f"{path}, line {lines[r]}, column {header[v[1][0]]!r}: amplitude {_num(amp[r])} "
-                                   f"{amp_unit} is beyond a displacement probe's range ({MAX_AMPLITUDE_M * 1e3:g} mm): "
+                                   f"{unit_text} is beyond a displacement probe's range ({MAX_AMPLITUDE_M * 1e3:g} mm): "
                                    "is --amp-unit right?")
     amps = data[:, [pair[0] for v in probes.values() for pair in v.values()]]
     if not (amps > 0).any():
         raise VectorTableError(f"{path}: every amplitude is zero: the table holds no vibration to diagnose")
     if float(amps.max()) * metres < MIN_AMPLITUDE_M:
         # 1e-300 um: no probe resolves it, and the fit's noise floor underflows
-        raise VectorTableError(f"{path}: the largest amplitude is {_num(amps.max())} {amp_unit}, below any displacement "
+        raise VectorTableError(f"{path}: the largest amplitude is {_num(amps.max())} {unit_text}, below any displacement "
                                f"probe's resolution ({MIN_AMPLITUDE_M * 1e9:g} nm): no vibration measured; is "
                                "--amp-unit right?")
     phases = data[:, [pair[1] for v in probes.values() for pair in v.values()]]
@@ -574,7 +613,7 @@ def load_vector_table(
         for j, name in enumerate(names):
             if n in probes[name]:
                 a, p = probes[name][n]
-                arr[:, j] = from_phase(data[:, a], data[:, p], phase) * 1.0
+                arr[:, j] = from_phase(data[:, a] * to_peak, data[:, p], phase)
         vectors[n] = arr
     ang = None
     if angles is not None:
