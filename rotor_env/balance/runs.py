@@ -340,20 +340,24 @@ def stack_tables(out: str | os.PathLike, tables: dict[str, str | os.PathLike | l
     into one with a ``run`` column."""
     import csv
 
+    from ..measurements.files import csv_dialect
     from ..outputs import atomic_write
 
     header = None
     rows: list[list[str]] = []
     pairs = [(run, p) for run, ps in tables.items() for p in (ps if isinstance(ps, list | tuple) else [ps])]
     for run, path in pairs:
+        # each file in its own dialect (semicolons, a decimal comma), written out as plain CSV
+        dialect = csv_dialect(path)
         with open(path, newline="", encoding="utf-8-sig") as fh:
-            reader = csv.reader(fh)
+            reader = csv.reader(fh, delimiter=dialect.delimiter)
             head = [h.strip() for h in next(reader)]
             if header is None:
                 header = head
             elif head != header:
                 raise BalanceError(f"{path}: columns {head} differ from the first table's {header}")
-            rows += [[run, *r] for r in reader if r and any(c.strip() for c in r)]
+            rows += [[run, *(c.replace(",", ".") if dialect.decimal == "," else c for c in r)]
+                     for r in reader if r and any(c.strip() for c in r)]
 
     def write(tmp: Path) -> None:
         with open(tmp, "w", newline="", encoding="utf-8") as fh:

@@ -1,5 +1,9 @@
 """Reading measurement files (CSV, Parquet) with validation that names the problem.
 
+CSV files are read in the dialect their first lines show (:func:`csv_dialect`): fields
+separated by commas, semicolons or tabs, and with semicolons or tabs the decimal comma of a
+European locale (``0,0001;-4,654``: what spreadsheet and acquisition software write there).
+
 Required columns: ``t``, ``phi``, ``theta_x``, ``theta_y``.  Rates and accelerations
 (``phi_dot``, ``phi_ddot``, ``theta_x_dot``, ``theta_y_dot``, ``theta_x_ddot``,
 ``theta_y_ddot``) are used when present; any that are missing are estimated from the
@@ -24,7 +28,9 @@ import csv
 import difflib
 import math
 import os
+import re
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -32,8 +38,22 @@ from scipy.signal import savgol_filter
 
 from .core import COLUMNS, Measurements
 
-__all__ = ["REQUIRED", "MeasurementError", "PhiUnwrapper", "check_finite", "check_header", "check_tilt", "check_time", "derive_rates",
-           "first_step", "load_measurements", "read_table"]
+__all__ = [
+    "REQUIRED",
+    "CsvDialect",
+    "MeasurementError",
+    "PhiUnwrapper",
+    "check_finite",
+    "check_header",
+    "check_tilt",
+    "check_time",
+    "csv_dialect",
+    "derive_rates",
+    "dialect_of_lines",
+    "first_step",
+    "load_measurements",
+    "read_table",
+]
 
 REQUIRED: tuple[str, ...] = ("t", "phi", "theta_x", "theta_y")
 #: derived column -> (source column, derivative order)
@@ -218,6 +238,56 @@ class PhiUnwrapper:
         return out
 
 
+@dataclass(frozen=True)
+class CsvDialect:
+    """How a CSV file writes its fields: the separator and the decimal mark."""
+
+    delimiter: str = ","
+    decimal: str = "."
+
+    def number(self, cell: str) -> float:
+        """A cell's number (``ValueError`` where it is none)."""
+        return float(cell.replace(",", ".") if self.decimal == "," else cell)
+
+
+#: the field separators a CSV file is read with (the first that splits the header most wins)
+CSV_DELIMITERS = (",", ";", "\t")
+#: lines read to tell the dialect (the header and the first data lines)
+DIALECT_LINES = 32
+#: a number written with a decimal comma: ``-4,654``, ``1,5e-3``
+_DECIMAL_COMMA = re.compile(r"[+-]?\d+,\d+(?:[eE][+-]?\d+)?")
+
+
+def csv_dialect(path: str | os.PathLike) -> CsvDialect:
+    """The dialect of a CSV file (:func:`dialect_of_lines` on its first lines); a file that
+    cannot be read as text gets the default (the reader's own error then names what is wrong)."""
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as fh:
+            return dialect_of_lines([fh.readline() for _ in range(DIALECT_LINES)])
+    except (OSError, UnicodeDecodeError):
+        return CsvDialect()
+
+
+def dialect_of_lines(lines: Sequence[str]) -> CsvDialect:
+    """The dialect of a CSV text from its header and first data lines: the separator of
+    :data:`CSV_DELIMITERS` that splits them all into the same, largest number of fields (a
+    comma where none splits them), and a decimal comma where the separator is not a comma and
+    those lines write a number with a comma and none with a point."""
+    lines = [ln.rstrip("\r\n") for ln in lines if ln.strip()]
+    best, fields, rows = ",", 1, []
+    for d in CSV_DELIMITERS:
+        try:
+            split = [next(csv.reader([ln], delimiter=d)) for ln in lines]
+        except csv.Error:
+            continue
+        if split and len(split[0]) > fields and all(len(r) == len(split[0]) for r in split):
+            best, fields, rows = d, len(split[0]), split[1:]
+    cells = [c.strip() for r in rows for c in r]
+    comma = any(_DECIMAL_COMMA.fullmatch(c) for c in cells)
+    point = any("." in c for c in cells)
+    return CsvDialect(best, "," if best != "," and comma and not point else ".")
+
+
 def read_table(path: str | os.PathLike, *, numeric: Sequence[str] | None = None
                ) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Header, float data and the file line number of every data row of a CSV or Parquet file.
@@ -227,7 +297,8 @@ def read_table(path: str | os.PathLike, *, numeric: Sequence[str] | None = None
     column must be numeric, unless ``numeric`` names the columns that must be: any other
     column that is not (a text note, a label) is read as NaN — the caller ignores it.
     Errors are :class:`MeasurementError` naming the file, line, column and value.
-    A timestamp/date column is refused (time is a number in the model's unit).
+    A timestamp/date column is refused (time is a number in the model's unit).  A CSV file
+    is read in its own dialect (:func:`csv_dialect`).
     """
     path = Path(path)
     if path.suffix == ".parquet":
@@ -242,13 +313,14 @@ def _read_csv(path: Path, numeric: Sequence[str] | None = None) -> tuple[list[st
     as it is (a bad cell, a blank line, a wrong field count: anything unusual) is read
     again by the line-by-line parser, whose errors name the line, column and value.
     """
-    fast = _read_csv_arrow(path, numeric)
+    dialect = csv_dialect(path)
+    fast = _read_csv_arrow(path, numeric, dialect)
     if fast is not None:
         return fast
     try:
         # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is not part of the first name
         with open(path, newline="", encoding="utf-8-sig") as fh:
-            return _parse_csv(path, csv.reader(fh), numeric)
+            return _parse_csv(path, csv.reader(fh, delimiter=dialect.delimiter), numeric, dialect)
     except UnicodeDecodeError as exc:
         raise MeasurementError(
             f"{path}: not a text (UTF-8) CSV file ({exc.reason} at byte {exc.start}); "
@@ -260,7 +332,7 @@ def _read_csv(path: Path, numeric: Sequence[str] | None = None) -> tuple[list[st
         raise MeasurementError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
 
 
-def _read_csv_arrow(path: Path, numeric: Sequence[str] | None):
+def _read_csv_arrow(path: Path, numeric: Sequence[str] | None, dialect: CsvDialect):
     """The fast path: ``None`` unless the file is clean (no blank line, null or odd cell)."""
     try:
         import pyarrow as pa
@@ -270,7 +342,7 @@ def _read_csv_arrow(path: Path, numeric: Sequence[str] | None):
     try:
         with open(path, "rb") as fh:
             first = fh.readline()
-        names = [h.strip() for h in next(csv.reader([first.decode("utf-8-sig")]))]
+        names = [h.strip() for h in next(csv.reader([first.decode("utf-8-sig")], delimiter=dialect.delimiter))]
     except (OSError, UnicodeDecodeError, csv.Error, StopIteration):
         return None  # the careful parser says what is wrong
     if not names or len(set(names)) != len(names):
@@ -280,8 +352,9 @@ def _read_csv_arrow(path: Path, numeric: Sequence[str] | None):
         table = pc.read_csv(
             path,
             read_options=pc.ReadOptions(column_names=names, skip_rows=1),
-            parse_options=pc.ParseOptions(ignore_empty_lines=False),
-            convert_options=pc.ConvertOptions(column_types={n: pa.float64() for n in names if n in want}),
+            parse_options=pc.ParseOptions(delimiter=dialect.delimiter, ignore_empty_lines=False),
+            convert_options=pc.ConvertOptions(column_types={n: pa.float64() for n in names if n in want},
+                                              decimal_point=dialect.decimal),
         )
     except (pa.ArrowException, OSError, ValueError):
         return None
@@ -301,7 +374,8 @@ def _read_csv_arrow(path: Path, numeric: Sequence[str] | None):
     return names, data, np.arange(m, dtype=np.int64) + 2
 
 
-def _parse_csv(path: Path, reader, numeric: Sequence[str] | None = None) -> tuple[list[str], np.ndarray, np.ndarray]:
+def _parse_csv(path: Path, reader, numeric: Sequence[str] | None = None, dialect: CsvDialect = CsvDialect()
+               ) -> tuple[list[str], np.ndarray, np.ndarray]:
     try:
         header = next(reader)
     except StopIteration:
@@ -320,13 +394,15 @@ def _parse_csv(path: Path, reader, numeric: Sequence[str] | None = None) -> tupl
             )
         for name, cell, required in zip(header, row, need, strict=True):
             try:
-                values.append(float(cell))
+                values.append(dialect.number(cell))
             except ValueError:
                 if not required:
                     values.append(math.nan)
                     continue
+                hint = ("" if dialect.decimal == "," or not _DECIMAL_COMMA.fullmatch(cell.strip()) else
+                        " (a decimal comma where the file's first lines write none: write every number alike)")
                 raise MeasurementError(
-                    f"{path}, line {line_no}, column {_cut(name)}: {_cut(cell.strip())} is not a number"
+                    f"{path}, line {line_no}, column {_cut(name)}: {_cut(cell.strip())} is not a number{hint}"
                 ) from None
         lines.append(line_no)
     data = np.frombuffer(values, dtype=float).reshape(len(lines), len(header)).copy()

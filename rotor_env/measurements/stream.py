@@ -36,13 +36,16 @@ from scipy.signal import savgol_filter
 from .core import COLUMNS
 from .files import (
     DERIVABLE,
+    DIALECT_LINES,
     REQUIRED,
+    CsvDialect,
     MeasurementError,
     PhiUnwrapper,
     check_finite,
     check_header,
     check_tilt,
     check_time,
+    dialect_of_lines,
     first_step,
 )
 
@@ -89,6 +92,8 @@ class StreamReader:
             self._fh = source
             self._path = None
         self.line = 1
+        #: the CSV dialect, read off the stream's first lines (:func:`~.files.dialect_of_lines`)
+        self._dialect = CsvDialect()
         self.error_line: int | None = None
         self._last_t = math.nan
         self._dt = 0.0
@@ -177,6 +182,9 @@ class StreamReader:
                 continue
             block, rest = rest[: cut + 1], rest[cut + 1 :]
             if header is None:
+                # the dialect (semicolons, tabs, a decimal comma) from the first complete lines
+                self._dialect = dialect_of_lines(block.decode("utf-8-sig", errors="replace")
+                                                 .split("\n", DIALECT_LINES)[:DIALECT_LINES])
                 first = block.index(b"\n")
                 header = self._header(block[:first])
                 block = block[first + 1 :]
@@ -195,6 +203,7 @@ class StreamReader:
             self._check_line_length(rest)
         if rest.strip():
             if header is None:
+                self._dialect = dialect_of_lines([rest.decode("utf-8-sig", errors="replace")])
                 header = self._header(rest)
             else:
                 yield from self._parsed(rest + b"\n", header)
@@ -226,7 +235,7 @@ class StreamReader:
         if len(raw) > MAX_LINE_BYTES:
             raise MeasurementError(f"{self.name}, line 1: the header is longer than {MAX_LINE_BYTES // 1000} kB")
         text = raw.decode("utf-8-sig", errors="replace").strip()
-        header = [h.strip() for h in next(csv.reader([text]))] if text else []
+        header = [h.strip() for h in next(csv.reader([text], delimiter=self._dialect.delimiter))] if text else []
         check_header(self.name, header, required=self.required, missing_hint=self.missing_hint)
         self._header_names = header
         return header
@@ -242,8 +251,9 @@ class StreamReader:
             table = pacsv.read_csv(
                 pa.BufferReader(block),
                 read_options=pacsv.ReadOptions(column_names=header, use_threads=False),
-                parse_options=pacsv.ParseOptions(newlines_in_values=False),
-                convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(header, pa.float64())),
+                parse_options=pacsv.ParseOptions(delimiter=self._dialect.delimiter, newlines_in_values=False),
+                convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(header, pa.float64()),
+                                                     decimal_point=self._dialect.decimal),
             )
             data = np.column_stack([table.column(i).to_numpy(zero_copy_only=False) for i in range(len(header))])
             if data.shape[0] == n_lines:
@@ -264,7 +274,7 @@ class StreamReader:
             if not raw.strip():
                 continue
             try:
-                cells = next(csv.reader([raw]))
+                cells = next(csv.reader([raw], delimiter=self._dialect.delimiter))
             except csv.Error as err:
                 self._partial = (np.array(rows, dtype=float).reshape(-1, len(header)), np.array(lines, dtype=np.int64))
                 exc = MeasurementError(f"{self.name}, line {line_no}: not a CSV row ({err})")
@@ -279,7 +289,7 @@ class StreamReader:
             vals = []
             for name, cell in zip(header, cells, strict=True):
                 try:
-                    vals.append(float(cell))
+                    vals.append(self._dialect.number(cell))
                 except ValueError:
                     self._partial = (np.array(rows, dtype=float).reshape(-1, len(header)),
                                      np.array(lines, dtype=np.int64))

@@ -653,8 +653,10 @@ def _text_column(path: Path, name: str) -> tuple[list[str], dict[int, str]]:
         cells = table.column(match[0]).to_pylist()
         return header, {r + 2: ("" if c is None else str(c).strip()) for r, c in enumerate(cells)}
     try:
+        from .files import csv_dialect
+
         with open(path, newline="", encoding="utf-8-sig") as fh:
-            reader = csv.reader(fh)
+            reader = csv.reader(fh, delimiter=csv_dialect(path).delimiter)
             header = [h.strip() for h in next(reader, [])]
             match = [j for j, h in enumerate(header) if h.lower() == name.lower()]
             if not match:

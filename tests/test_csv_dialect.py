@@ -1,0 +1,126 @@
+"""CSV files as acquisition and spreadsheet software write them: commas, semicolons or tabs
+between the fields, and with semicolons or tabs a decimal comma (a European locale).  Each is
+read as the plain comma file it stands for (:func:`rotor_env.measurements.files.csv_dialect`)."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+
+from rotor_env.balance import stack_tables
+from rotor_env.measurements.files import CsvDialect, MeasurementError, csv_dialect, read_table
+from rotor_env.measurements.rig import load_rig
+from rotor_env.measurements.vectors import load_vector_table
+from rotor_env.measurements.waveforms import load_waveforms
+from rotor_env.params import RotorParams
+from rotor_env.rig_simulation import simulate_rig
+
+ONE_PLANE = "keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n"
+#: (delimiter, decimal) of the exports tried
+DIALECTS = [(",", "."), (";", "."), (";", ","), ("\t", "."), ("\t", ",")]
+
+
+def _rewrite(src, dst, delimiter: str, decimal: str, *, bom: bool = False, blank_line: bool = False) -> None:
+    """``src`` (a plain CSV) in another dialect; ``blank_line``: one empty line in the middle (the
+    careful line-by-line reader then reads it, not the fast one)."""
+    with open(src, newline="") as fh:
+        rows = list(csv.reader(fh))
+    with open(dst, "w", newline="", encoding="utf-8-sig" if bom else "utf-8") as fh:
+        w = csv.writer(fh, delimiter=delimiter)
+        for i, r in enumerate(rows):
+            if blank_line and i == len(rows) // 2:
+                fh.write("\r\n")
+            w.writerow(r if i == 0 or decimal == "." else [c.replace(".", ",") for c in r])
+
+
+@pytest.fixture(scope="module")
+def record(tmp_path_factory):
+    """A short rig record (probes in um, keyphasor) and its 1X table, as plain CSV."""
+    folder = tmp_path_factory.mktemp("dialect")
+    (folder / "rig.yaml").write_text(ONE_PLANE)
+    rig = load_rig(folder / "rig.yaml")
+    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6}, effects=("stiffness",
+                         "viscous_damping", "unbalance"))
+    run = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=600.0, rpm_to=2400.0, rpm_per_s=600.0,
+                       noise=0.3, seed=3, sample_rate=2500.0)
+    cols = run.file_columns()
+    np.savetxt(folder / "run.csv", np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols),
+               comments="", fmt="%.10g")
+    run.vectors(rig, (1,)).to_csv(folder / "table.csv")
+    return folder, rig
+
+
+@pytest.mark.parametrize(("delimiter", "decimal"), DIALECTS)
+def test_the_dialect_is_read_off_the_first_lines(record, delimiter, decimal):
+    folder, _ = record
+    path = folder / f"d{ord(delimiter)}{ord(decimal)}.csv"
+    _rewrite(folder / "run.csv", path, delimiter, decimal, bom=True)
+    assert csv_dialect(path) == CsvDialect(delimiter, decimal)
+
+
+@pytest.mark.parametrize(("delimiter", "decimal"), DIALECTS)
+@pytest.mark.parametrize("blank_line", [False, True])
+def test_every_dialect_reads_the_same_numbers(record, delimiter, decimal, blank_line):
+    folder, rig = record
+    head0, data0, _ = read_table(folder / "run.csv")
+    path = folder / f"r{ord(delimiter)}{ord(decimal)}{int(blank_line)}.csv"
+    _rewrite(folder / "run.csv", path, delimiter, decimal, blank_line=blank_line)
+    head, data, lines = read_table(path)
+    assert head == head0
+    np.testing.assert_array_equal(data, data0)  # the same text, the same doubles
+    # file lines as errors name them: the header is line 1, a blank line counts
+    assert lines[-1] == len(data) + 1 + int(blank_line)
+    rec0, rec = load_waveforms(folder / "run.csv", rig), load_waveforms(path, rig)
+    np.testing.assert_array_equal(rec.u, rec0.u)
+    np.testing.assert_array_equal(rec.phi, rec0.phi)
+
+
+@pytest.mark.parametrize(("delimiter", "decimal"), [(";", ","), ("\t", ".")])
+def test_tables_and_balancing_stacks_read_every_dialect(record, tmp_path, delimiter, decimal):
+    folder, _ = record
+    path = tmp_path / "table.csv"
+    _rewrite(folder / "table.csv", path, delimiter, decimal)
+    t0 = load_vector_table(folder / "table.csv", angles={"x": 45.0, "y": -45.0})
+    t1 = load_vector_table(path, angles={"x": 45.0, "y": -45.0})
+    np.testing.assert_array_equal(t1.vectors[1], t0.vectors[1])
+    np.testing.assert_array_equal(t1.speed, t0.speed)
+    # a campaign joined from one plain and one European file: plain CSV out, every number read
+    out = stack_tables(tmp_path / "stacked.csv", {"ref": folder / "table.csv", "T1": path})
+    runs = load_vector_table(out, run_column="run")
+    n = len(t0.speed)
+    np.testing.assert_array_equal(runs.vectors[1][n:], runs.vectors[1][:n])
+    assert runs.runs == ("ref",) * n + ("T1",) * n
+
+
+def test_a_decimal_comma_the_first_lines_do_not_show_is_named(tmp_path):
+    path = tmp_path / "late.csv"
+    rows = [f"{i};0;0;0" for i in range(40)] + ["40;0;4,5;2"]
+    path.write_text("t;kp;x;y\n" + "\n".join(rows) + "\n")
+    with pytest.raises(MeasurementError, match=r"late.csv, line 42, column 'x': '4,5' is not a number \(a decimal "
+                                                r"comma where the file's first lines write none"):
+        read_table(path)
+    # a comma file keeps its commas as separators: a point-decimal file is untouched
+    plain = tmp_path / "plain.csv"
+    plain.write_text("t,x\n0,1.5\n1,2.5\n")
+    assert csv_dialect(plain) == CsvDialect(",", ".")
+    assert read_table(plain)[1].tolist() == [[0.0, 1.5], [1.0, 2.5]]
+
+
+@pytest.mark.parametrize(("delimiter", "decimal"), [(";", ","), ("\t", ".")])
+def test_the_stream_reader_reads_every_dialect(tmp_path, delimiter, decimal):
+    """The monitor's reader (blocks of bytes, a file being appended) gives the same samples."""
+    from rotor_env.measurements.stream import StreamReader
+    from rotor_env.simulator import simulate
+
+    run = simulate(RotorParams(), t_end=30.0, dt=0.01)
+    plain = tmp_path / "plain.csv"
+    data = np.column_stack([run[c] for c in ("t", "phi", "theta_x", "theta_y")])
+    np.savetxt(plain, data, delimiter=",", header="t,phi,theta_x,theta_y", comments="", fmt="%.12g")
+    other = tmp_path / "other.csv"
+    _rewrite(plain, other, delimiter, decimal)
+    a = np.concatenate(list(StreamReader(plain, chunk_bytes=4096)))
+    b = np.concatenate(list(StreamReader(other, chunk_bytes=4096)))
+    np.testing.assert_array_equal(a, b)
+    assert a.shape == (len(data), 10)
