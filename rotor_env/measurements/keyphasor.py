@@ -13,7 +13,13 @@ removes (tried: a local cubic over 11 turns put 0.04 rad into the first turns), 
 angle is the cubic spline through ``(edge k, 2 pi k)`` (continuous speed and
 acceleration).  Sample fast enough that ``speed * dt / 2`` is small where it matters.  The record is cut to the span between the first and the last pulse.
 The leading edge is the transition into the pulse's short state: a notch gives a brief
-dip, a projection a brief rise — the state the signal spends less time in.
+dip, a projection a brief rise — the state the signal spends less time in.  The state
+changes with hysteresis, as a comparator's (Schmitt trigger): into the pulse only past
+the threshold plus :data:`HYSTERESIS` of the signal's swing, out of it only past the
+threshold minus as much, so noise on the keyphasor (0.3 V on a 5 V pulse: a few crossings
+at every edge, read as extra pulses) does not chatter; the edge's time is still the
+threshold's last crossing before the pulse is entered (a clean edge: the same time as
+without the band).
 
 Checks (a clear error naming the file, column, time and line): too few pulses; a
 revolution twice as long as its neighbours say (a missed pulse) or half as long (a
@@ -43,6 +49,49 @@ __all__ = ["SPIN_KNOT_REVOLUTIONS", "KeyphasorError", "KeyphasorTracker", "check
 MIN_PULSES = 5
 #: a revolution this much longer (shorter) than its neighbours is a missed (extra) pulse
 PERIOD_RATIO = (0.6, 1.6)
+#: the trigger's hysteresis each side of the threshold, a share of the signal's swing (the
+#: 0.1 to 99.9 % levels): the pulse is entered past threshold + 0.2 swing, left past
+#: threshold - 0.2 swing (noise must reach a fifth of the swing to chatter)
+HYSTERESIS = 0.2
+
+
+def _band(lo: float, hi: float, thr: float) -> float:
+    """The trigger's hysteresis for levels ``lo``, ``hi`` and threshold ``thr`` (a given
+    threshold near a level narrows it: both of its ends stay inside the swing)."""
+    return 0.999 * min(HYSTERESIS * (hi - lo), hi - thr, thr - lo)
+
+
+def _schmitt_edges(t: np.ndarray, y: np.ndarray, thr: float, band: float, *, armed: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray, bool, int]:
+    """Leading edges of ``y`` (the pulse is ``y > thr``) with hysteresis ``band``: where the
+    trigger enters the pulse (``y`` above ``thr + band`` since it was last below
+    ``thr - band``), the first sample after the threshold's last crossing before each entry
+    and the crossing's time (linear between the two samples around it), the trigger's
+    state after the last sample, and the
+    first sample of the tail an edge may still start from (a sample at or below ``thr``
+    after which the trigger has not entered a pulse; ``len(y)`` when none): a stream keeps
+    that tail for its next chunk.  ``armed``: the trigger was in a pulse before ``y[0]``."""
+    n = len(y)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0), armed, 0
+    level = np.where(y > thr + band, 1, np.where(y < thr - band, 0, -1))
+    # the trigger's state: the last definite level (-1: still the state before the samples)
+    idx = np.where(level >= 0, np.arange(n), -1)
+    last = np.maximum.accumulate(idx)
+    state = np.where(last >= 0, level[np.maximum(last, 0)], int(armed)).astype(bool)
+    before = np.concatenate([[armed], state[:-1]])
+    m = np.nonzero(state & ~before)[0]
+    # the threshold's last crossing before each entry: the last sample at or below it
+    low = np.maximum.accumulate(np.where(y <= thr, np.arange(n), -1))
+    j = low[m]
+    j = j[j >= 0]  # an entry with no sample below the threshold in these samples: not timed
+    frac = (thr - y[j]) / (y[j + 1] - y[j])
+    times = t[j] + frac * (t[j + 1] - t[j])
+    tail = n
+    if not state[-1] and low[-1] >= 0:
+        tail = int(low[-1])
+    return j + 1, times, bool(state[-1]), tail
+
 
 
 class KeyphasorError(ValueError):
@@ -88,6 +137,11 @@ def period_ratio_before(edges: np.ndarray, i: int) -> float | None:
     return float(period[3] * predicted / (2.0 * math.pi)) if predicted > 0 else math.inf
 
 
+def _times(ratio: float) -> str:
+    """``0.48x``; a ratio that is not finite (neighbours a sample apart) in words."""
+    return f"{ratio:.2f}x" if math.isfinite(ratio) else "out of all proportion to"
+
+
 def check_periods(edges: np.ndarray, revolutions, threshold: float, *, where: str,
                   line_of: Callable[[int], int] | None = None, first_pulse: int = 0) -> None:
     """The missing/extra-pulse check of :func:`pulse_edges` (and :class:`KeyphasorTracker`):
@@ -111,7 +165,7 @@ def check_periods(edges: np.ndarray, revolutions, threshold: float, *, where: st
         n = first_pulse + i
         exc = KeyphasorError(
             f"{where}{line}: irregular pulses at t = {edges[i]:.6g}: a revolution of {period:.4g} between "
-            f"pulses {n + 1} and {n + 2}, {ratio:.2f}x {against} ({kind}); check the threshold "
+            f"pulses {n + 1} and {n + 2}, {_times(ratio)} {against} ({kind}); check the threshold "
             f"(now {threshold:g}) or the keyphasor signal"
         )
         exc.line = line_of(i) if line_of is not None else None
@@ -130,18 +184,14 @@ def pulse_edges(t: np.ndarray, signal: np.ndarray, threshold: float | None = Non
     thr = 0.5 * (lo + hi) if threshold is None else float(threshold)
     if not lo < thr < hi:
         raise KeyphasorError(f"{where}: threshold {thr:g} is outside the signal's range [{lo:g}, {hi:g}]")
-    high = x > thr
     # the pulse is the short state: a projection is high briefly, a notch low briefly
-    pulse_high = high.mean() < 0.5
-    state = high if pulse_high else ~high
-    k = np.nonzero(~state[:-1] & state[1:])[0]  # last sample before the edge
-    if len(k) < MIN_PULSES:
-        raise KeyphasorError(f"{where}: only {len(k)} pulses found (threshold {thr:g}); at least {MIN_PULSES} "
+    sign = 1.0 if (x > thr).mean() < 0.5 else -1.0
+    after, edges, _, _ = _schmitt_edges(t, sign * x, sign * thr, _band(lo, hi, thr))
+    if len(after) < MIN_PULSES:
+        raise KeyphasorError(f"{where}: only {len(after)} pulses found (threshold {thr:g}); at least {MIN_PULSES} "
                              "revolutions are needed")
-    frac = (thr - x[k]) / (x[k + 1] - x[k])
-    edges = t[k] + frac * (t[k + 1] - t[k])
     check_periods(edges, range(len(edges) - 1), thr, where=where,
-                  line_of=(lambda i: int(lines[k[i] + 1])) if lines is not None else None)
+                  line_of=(lambda i: int(lines[after[i]])) if lines is not None else None)
     return edges
 
 
@@ -228,7 +278,8 @@ class KeyphasorTracker:
       pulse's polarity (the short state) are fixed from the first samples (at least
       :data:`LEVEL_SAMPLES` and two leading edges): a threshold that followed the signal
       would move the edges and put a wobble into the angle.
-    - An edge between two chunks is found from the last sample kept from the chunk before.
+    - An edge between two chunks is found from the samples kept from the chunk before (from
+      the threshold's last crossing on, while the pulse is not yet entered past the band).
     - Revolution ``k`` (edge ``k`` to ``k + 1``) is handed out once edge ``k + 4`` is known:
       its missing/extra-pulse check (:func:`check_periods`, the batch path's) reads the
       2nd and 3rd revolutions on each side (so a sample is never handed out before its
@@ -245,7 +296,11 @@ class KeyphasorTracker:
         self._fixed = False
         self._pulse_high = True
         self._level: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
-        self._prev: tuple[float, float] | None = None  # last sample (t, signal) of the chunk before
+        # the samples of the chunk before an edge may still start from (the threshold crossed,
+        # the pulse not yet entered past the hysteresis band), and the trigger's state
+        self._tail = (np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.int64))
+        self._armed = False
+        self._band = 0.0
         self._edges = np.zeros(0)  # a window of the edges; edges[0] is pulse number _e0
         self._edge_lines = np.zeros(0, dtype=np.int64)
         self._e0 = 0
@@ -323,6 +378,7 @@ class KeyphasorTracker:
         if not final and np.count_nonzero(~state[:-1] & state[1:]) < 2:
             return False
         self.threshold, self._pulse_high, self._fixed = thr, pulse_high, True
+        self._band = _band(lo, hi, thr)
         return True
 
     def _try_levels(self, *, final: bool, limit: bool) -> bool:
@@ -335,20 +391,17 @@ class KeyphasorTracker:
     def _find_edges(self, t: np.ndarray, x: np.ndarray, lines: np.ndarray) -> None:
         if not len(t):
             return
-        if self._prev is not None:
-            tt = np.concatenate([[self._prev[0]], t])
-            xx = np.concatenate([[self._prev[1]], x])
-            ll = np.concatenate([[-1], lines])
-        else:
-            tt, xx, ll = t, x, lines
-        high = xx > self.threshold
-        state = high if self._pulse_high else ~high
-        k = np.nonzero(~state[:-1] & state[1:])[0]
-        self._prev = (float(t[-1]), float(x[-1]))
-        if not len(k):
+        tt, xx, ll = (np.concatenate([a, b]) for a, b in zip(self._tail, (t, x, lines), strict=True))
+        sign = 1.0 if self._pulse_high else -1.0
+        after, new, armed, tail = _schmitt_edges(tt, sign * xx, sign * self.threshold, self._band,
+                                                 armed=self._armed)
+        # the tail is re-read with the next chunk, from the state the trigger had there
+        self._armed = armed if tail == len(tt) else False
+        # a signal that stays inside the band keeps no more than MAX_LEVEL_SAMPLES (memory bounded)
+        tail = max(tail, len(tt) - MAX_LEVEL_SAMPLES)
+        self._tail = (tt[tail:], xx[tail:], ll[tail:])
+        if not len(new):
             return
-        frac = (self.threshold - xx[k]) / (xx[k + 1] - xx[k])
-        new = tt[k] + frac * (tt[k + 1] - tt[k])
         before = self._edges[-1:] if len(self._edges) else np.zeros(0)
         periods = np.diff(np.concatenate([before, new]))
         if periods.size and np.isfinite(self._dt):
@@ -356,12 +409,12 @@ class KeyphasorTracker:
             if short.any():
                 j = int(np.argmax(short))
                 m = j + 1 - len(before)  # the new edge ending the short revolution
-                exc = KeyphasorError(f"{self.where}, line {ll[k[m] + 1]}: only {periods[j] / self._dt:.1f} samples "
+                exc = KeyphasorError(f"{self.where}, line {ll[after[m]]}: only {periods[j] / self._dt:.1f} samples "
                                      f"per revolution at t = {new[m]:.6g}: sample faster")
-                exc.line = int(ll[k[m] + 1])
+                exc.line = int(ll[after[m]])
                 raise exc
         self._edges = np.concatenate([self._edges, new])
-        self._edge_lines = np.concatenate([self._edge_lines, ll[k + 1]])
+        self._edge_lines = np.concatenate([self._edge_lines, ll[after]])
         self._n_edges += len(new)
 
     def _hold(self, t: np.ndarray, payload: np.ndarray, lines: np.ndarray) -> None:
