@@ -84,6 +84,7 @@ def test_without_the_hysteresis_such_noise_is_read_as_extra_pulses(clean):
         assert len(pulse_edges(t, noisy)) == len(pulse_edges(t, kp))
         with pytest.MonkeyPatch.context() as mp:
             mp.setattr(keyphasor, "HYSTERESIS", 0.0)
+            mp.setattr(keyphasor, "drop_spurious_pulses", lambda e: (e, []))  # nor the spikes' repair
             try:
                 pulse_edges(t, noisy)
             except KeyphasorError as exc:
@@ -122,3 +123,90 @@ def test_the_chunked_tracker_finds_the_batch_edges_on_a_noisy_keyphasor(clean, c
     assert keep.sum() > 0.9 * len(batch)
     diff = (at[keep] - batch[turns[keep] + n]) / dt
     assert np.abs(diff).max() < 0.5, np.abs(diff).max()
+
+
+def _spiked(t, kp, where):
+    """``kp`` with one-sample spikes to the notch's level at the sample nearest each time of ``where``."""
+    out = kp.copy()
+    for w in where:
+        out[int(np.searchsorted(t, w))] = -5.0
+    return out
+
+
+def test_a_spike_on_the_keyphasor_is_dropped_and_said(clean):
+    """Interference on the keyphasor: a spike in the middle of a revolution, and a ringing edge
+    (a second trigger just after a notch) -- each splits a revolution in two; dropped, the
+    edges are the clean record's, and the note names the time and the line."""
+    t, kp = clean
+    edges = pulse_edges(t, kp)
+    mid = 0.5 * (edges[60] + edges[61])
+    ring = edges[120] + 0.15 * (edges[121] - edges[120])
+    notes: list[str] = []
+    got = pulse_edges(t, _spiked(t, kp, [mid, ring]), lines=np.arange(len(t)) + 2, notes=notes)
+    # (the spikes' two samples move the 0.1 % level, and the threshold with it, by a hair)
+    np.testing.assert_allclose(got, edges, rtol=0, atol=1e-9)
+    assert len(notes) == 1 and notes[0].startswith("2 spurious keyphasor pulses dropped (t = ")
+    line = int(np.searchsorted(t, mid)) + 2
+    assert f"line {line}" in notes[0]
+
+
+def test_many_spikes_are_a_keyphasor_to_look_at(clean):
+    """More spurious pulses than one in fifty: refused, as before."""
+    t, kp = clean
+    edges = pulse_edges(t, kp)
+    mids = 0.5 * (edges[10:-10:8] + edges[11:-9:8])  # every 8th revolution
+    with pytest.raises(KeyphasorError, match="irregular pulses"):
+        pulse_edges(t, _spiked(t, kp, mids))
+
+
+@pytest.mark.parametrize("chunk", [97, 4096])
+def test_the_chunked_tracker_drops_the_same_spike(clean, chunk):
+    t, kp = clean
+    edges = pulse_edges(t, kp)
+    mid = 0.5 * (edges[60] + edges[61])
+    spiked = _spiked(t, kp, [mid])
+    tracker = KeyphasorTracker(where="kp")
+    lines = np.arange(len(t)) + 2
+    out_t, out_phi = [], []
+    for lo in range(0, len(t), chunk):
+        sl = slice(lo, lo + chunk)
+        got = tracker.push(t[sl], spiked[sl], spiked[sl], lines[sl])
+        out_t.append(got[0])
+        out_phi.append(got[1])
+    got = tracker.finish()
+    ts, phis = np.concatenate([*out_t, got[0]]), np.concatenate([*out_phi, got[1]])
+    assert tracker.edges_seen == len(edges)
+    assert len(tracker.dropped) == 1 and abs(tracker.dropped[0][0] - mid) < 2 * (t[1] - t[0])
+    # the handed-out angle is the clean record's: a whole turn at each clean edge
+    turns = np.arange(math.ceil(phis[0] / (2 * math.pi)), math.floor(phis[-1] / (2 * math.pi)) + 1)
+    at = np.interp(2 * math.pi * turns, phis, ts)
+    n = np.searchsorted(edges, at[0] - 0.5 * np.median(np.diff(edges))) - turns[0]
+    keep = (turns + n >= 0) & (turns + n < len(edges))
+    np.testing.assert_allclose(at[keep], edges[turns[keep] + n], rtol=0, atol=0.05 * (t[1] - t[0]))
+
+
+def test_the_record_and_the_monitors_stream_say_the_spike(tmp_path):
+    """Through the readers a user meets: ``load_waveforms`` (diagnose) and ``RigStream`` (monitor)."""
+    from rotor_env.measurements.rig_stream import RigStream
+    from rotor_env.measurements.waveforms import load_waveforms
+
+    (tmp_path / "rig.yaml").write_text(ONE_PLANE)
+    rig = load_rig(tmp_path / "rig.yaml")
+    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6},
+                         effects=("stiffness", "viscous_damping", "unbalance"))
+    cols = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=300.0, rpm_to=2400.0, rpm_per_s=600.0,
+                        noise=0.3, seed=4, sample_rate=5000.0).file_columns()
+    edges = pulse_edges(cols["t"], cols["kp"])
+    k = int(np.searchsorted(cols["t"], 0.5 * (edges[30] + edges[31])))
+    cols["kp"] = np.array(cols["kp"], dtype=float)
+    cols["kp"][k] = -5.0
+    path = tmp_path / "run.csv"
+    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="",
+               fmt="%.10g")
+    crossing = 0.5 * (cols["t"][k - 1] + cols["t"][k])  # the spike's edge: halfway into it
+    said = f"1 spurious keyphasor pulse dropped (t = {crossing:.6g} s, line {k + 2})"
+    assert any(n.startswith(said) for n in load_waveforms(path, rig).notes)
+    stream = RigStream(path, rig, 1650.0, chunk_bytes=8192)
+    for _ in stream:
+        pass
+    assert any(n.startswith(said) for n in stream.notes), stream.notes

@@ -117,8 +117,8 @@ def _pulses(n_turns=60, fs=4000.0, accel=30.0, w0=40.0, drop=None, extra=None):
     turn = np.floor(phi / (2 * math.pi))
     if drop is not None:
         kp[(turn == drop) & (frac < 0.05)] = 0.0
-    if extra is not None:
-        kp[(turn == extra) & (np.abs(frac - 0.5) < 0.02)] = -5.0
+    for e in [] if extra is None else np.atleast_1d(extra):
+        kp[(turn == e) & (np.abs(frac - 0.5) < 0.02)] = -5.0
     return t, phi, kp
 
 
@@ -153,12 +153,24 @@ def test_keyphasor_gives_the_spin_angle_speed_and_acceleration(ramp, tol):
     assert np.median(a[mid]) == pytest.approx(30.0, rel=0.05)
 
 
-@pytest.mark.parametrize(("kw", "word"), [({"drop": 30}, "missing pulse"), ({"extra": 40}, "extra pulse")])
+@pytest.mark.parametrize(("kw", "word"), [({"drop": 30}, "missing pulse"),
+                                         ({"extra": [10, 20, 30, 40]}, "extra pulse")])
 def test_missing_or_extra_pulse_is_a_clear_error(kw, word):
+    """A missing pulse, and extra pulses beyond the share dropped as spurious (one in fifty)."""
     t, _, kp = _pulses(**kw)
     with pytest.raises(KeyphasorError) as err:
         pulse_edges(t, kp, where="run.csv, column 'kp'")
     assert word in str(err.value) and "run.csv, column 'kp'" in str(err.value) and "t = " in str(err.value)
+
+
+def test_one_extra_pulse_in_mid_turn_is_dropped_and_said():
+    """A pulse in the middle of turn 40 (interference): the turn's two parts add up to one, so it
+    is dropped (``keyphasor.drop_spurious_pulses``) and the edges are those without it."""
+    t, _, kp = _pulses(extra=40)
+    notes: list[str] = []
+    got = pulse_edges(t, kp, notes=notes)
+    np.testing.assert_array_equal(got, pulse_edges(t, _pulses()[2]))
+    assert len(notes) == 1 and "1 spurious keyphasor pulse dropped" in notes[0]
 
 
 def test_a_start_from_rest_is_not_a_missing_pulse():

@@ -21,6 +21,12 @@ at every edge, read as extra pulses) does not chatter; the edge's time is still 
 threshold's last crossing before the pulse is entered (a clean edge: the same time as
 without the band).
 
+A spurious pulse (a spike of interference on the keyphasor, a ringing edge) splits one
+revolution in two: where the two parts together are a revolution as its neighbours say
+(:data:`SPURIOUS_RATIO`) and the pulse is one of few (:data:`MAX_SPURIOUS_SHARE`), it is
+dropped and said in the record's notes (:func:`spurious_pulse`); otherwise the checks below
+refuse the record.
+
 Checks (a clear error naming the file, column, time and line): too few pulses; a
 revolution twice as long as its neighbours say (a missed pulse) or half as long (a
 double trigger, noise): its period times the speed its neighbours' line predicts,
@@ -44,11 +50,18 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 __all__ = ["SPIN_KNOT_REVOLUTIONS", "KeyphasorError", "KeyphasorTracker", "check_once_per_turn", "check_periods",
-           "order_amplitudes", "pulse_edges", "smooth_spin", "spin_from_pulses"]
+           "drop_spurious_pulses", "order_amplitudes", "pulse_edges", "smooth_spin", "spin_from_pulses",
+           "spurious_note", "spurious_pulse"]
 
 MIN_PULSES = 5
 #: a revolution this much longer (shorter) than its neighbours is a missed (extra) pulse
 PERIOD_RATIO = (0.6, 1.6)
+#: a pulse is spurious where dropping it leaves a revolution this close to what its
+#: neighbours say (its two parts were irregular)
+SPURIOUS_RATIO = (0.85, 1.18)
+#: at most this share of a record's pulses is dropped as spurious (at least one): more is a
+#: keyphasor signal to look at, refused as irregular
+MAX_SPURIOUS_SHARE = 0.02
 #: the trigger's hysteresis each side of the threshold, a share of the signal's swing (the
 #: 0.1 to 99.9 % levels): the pulse is entered past threshold + 0.2 swing, left past
 #: threshold - 0.2 swing (noise must reach a fifth of the swing to chatter)
@@ -67,10 +80,10 @@ def _schmitt_edges(t: np.ndarray, y: np.ndarray, thr: float, band: float, *, arm
     trigger enters the pulse (``y`` above ``thr + band`` since it was last below
     ``thr - band``), the first sample after the threshold's last crossing before each entry
     and the crossing's time (linear between the two samples around it), the trigger's
-    state after the last sample, and the
-    first sample of the tail an edge may still start from (a sample at or below ``thr``
-    after which the trigger has not entered a pulse; ``len(y)`` when none): a stream keeps
-    that tail for its next chunk.  ``armed``: the trigger was in a pulse before ``y[0]``."""
+    state after the last sample, and the first sample of the tail an edge may still start
+    from (a sample at or below ``thr`` after which the trigger has not entered a pulse;
+    ``len(y)`` when none): a stream keeps that tail for its next chunk.  ``armed``: the
+    trigger was in a pulse before ``y[0]``."""
     n = len(y)
     if n == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0), armed, 0
@@ -91,7 +104,6 @@ def _schmitt_edges(t: np.ndarray, y: np.ndarray, thr: float, band: float, *, arm
     if not state[-1] and low[-1] >= 0:
         tail = int(low[-1])
     return j + 1, times, bool(state[-1]), tail
-
 
 
 class KeyphasorError(ValueError):
@@ -142,6 +154,50 @@ def _times(ratio: float) -> str:
     return f"{ratio:.2f}x" if math.isfinite(ratio) else "out of all proportion to"
 
 
+def spurious_pulse(edges: np.ndarray, i: int) -> int | None:
+    """Of the two pulses that bound the irregular revolution ``i``, the one whose removal
+    leaves a revolution within :data:`SPURIOUS_RATIO` of its neighbours (the closer to them
+    where both do), neither the first nor the last; ``None`` where none does."""
+    best, best_gap = None, math.inf
+    for c in (i + 1, i):
+        if not 0 < c < len(edges) - 1:
+            continue
+        ratio = period_ratio(np.delete(edges, c), c - 1)
+        if ratio is not None and SPURIOUS_RATIO[0] <= ratio <= SPURIOUS_RATIO[1] and abs(ratio - 1.0) < best_gap:
+            best, best_gap = c, abs(ratio - 1.0)
+    return best
+
+
+def _irregular(edges: np.ndarray, i: int) -> bool:
+    ratio = period_ratio(edges, i)
+    if ratio is not None and not PERIOD_RATIO[0] <= ratio <= PERIOD_RATIO[1]:
+        return True
+    ratio = period_ratio_before(edges, i)
+    return ratio is not None and not PERIOD_RATIO[0] <= ratio <= PERIOD_RATIO[1]
+
+
+def drop_spurious_pulses(edges: np.ndarray) -> tuple[np.ndarray, list[int]]:
+    """``edges`` without the spurious pulses (module docstring) and the indices (in
+    ``edges``) of those dropped; at most :data:`MAX_SPURIOUS_SHARE` of them (the irregular
+    revolutions left are :func:`check_periods`' to refuse)."""
+    limit = max(1, int(MAX_SPURIOUS_SHARE * len(edges)))
+    keep = np.ones(len(edges), dtype=bool)
+    out = np.asarray(edges, dtype=float)
+    dropped: list[int] = []
+    i = 0
+    while i < len(out) - 1 and len(dropped) < limit:
+        if _irregular(out, i):
+            c = spurious_pulse(out, i)
+            if c is not None:
+                dropped.append(int(np.nonzero(keep)[0][c]))
+                keep[dropped[-1]] = False
+                out = np.delete(out, c)
+                i = max(c - 4, 0)  # the revolutions that read the dropped one, again
+                continue
+        i += 1
+    return out, sorted(dropped)
+
+
 def check_periods(edges: np.ndarray, revolutions, threshold: float, *, where: str,
                   line_of: Callable[[int], int] | None = None, first_pulse: int = 0) -> None:
     """The missing/extra-pulse check of :func:`pulse_edges` (and :class:`KeyphasorTracker`):
@@ -173,8 +229,9 @@ def check_periods(edges: np.ndarray, revolutions, threshold: float, *, where: st
 
 
 def pulse_edges(t: np.ndarray, signal: np.ndarray, threshold: float | None = None, *, where: str = "keyphasor",
-                lines: np.ndarray | None = None) -> np.ndarray:
-    """Times of the pulses' leading edges (see the module docstring)."""
+                lines: np.ndarray | None = None, notes: list[str] | None = None) -> np.ndarray:
+    """Times of the pulses' leading edges (see the module docstring); ``notes``: where given,
+    a sentence is appended for the spurious pulses dropped."""
     t = np.asarray(t, dtype=float)
     x = np.asarray(signal, dtype=float)
     # 0.1 / 99.9 %: a narrow notch (1 % of a turn) still reaches its level
@@ -190,9 +247,24 @@ def pulse_edges(t: np.ndarray, signal: np.ndarray, threshold: float | None = Non
     if len(after) < MIN_PULSES:
         raise KeyphasorError(f"{where}: only {len(after)} pulses found (threshold {thr:g}); at least {MIN_PULSES} "
                              "revolutions are needed")
+    edges0 = edges
+    edges, dropped = drop_spurious_pulses(edges)
+    if dropped and notes is not None:
+        notes.append(spurious_note([(float(edges0[k]), int(lines[after[k]]) if lines is not None else None)
+                                    for k in dropped]))
+    after = np.delete(after, dropped)
     check_periods(edges, range(len(edges) - 1), thr, where=where,
                   line_of=(lambda i: int(lines[after[i]])) if lines is not None else None)
     return edges
+
+
+def spurious_note(pulses: list[tuple[float, int | None]]) -> str:
+    """The record's note on the spurious pulses dropped: ``(time in s, file line or None)``."""
+    where = "; ".join(f"t = {tk:.6g} s" + (f", line {ln}" if ln is not None else "") for tk, ln in pulses[:5])
+    more = f" and {len(pulses) - 5} more" if len(pulses) > 5 else ""
+    n = len(pulses)
+    return (f"{n} spurious keyphasor pulse{'s' if n > 1 else ''} dropped ({where}{more}): each split a revolution "
+            "into two parts that add up to the one its neighbours say (interference on the keyphasor, a ringing edge)")
 
 
 #: the probes' order-1 amplitude (median over revolutions) below this share of their order-2
@@ -312,6 +384,8 @@ class KeyphasorTracker:
         self._held_lines = np.zeros(0, dtype=np.int64)
         #: an irregular revolution found: the samples before it were handed out, none after
         self.error: KeyphasorError | None = None
+        #: the spurious pulses dropped: (time, file line of the sample after the edge)
+        self.dropped: list[tuple[float, int]] = []
 
     @property
     def edges_seen(self) -> int:
@@ -435,13 +509,25 @@ class KeyphasorTracker:
         # the missing/extra-pulse check of every revolution handed out (its neighbours are
         # known); at an irregular one, the revolutions before it go out and the error waits
         # in ``error`` (the caller processes them first)
-        for i in range(self._next, stop):
+        i = self._next
+        while i < stop:
             try:
                 check_periods(edges, (i - e0,), float(self.threshold), where=self.where,
                               line_of=lambda j: int(self._edge_lines[j]), first_pulse=e0)
             except KeyphasorError as exc:
-                self.error, stop = exc, i
-                break
+                c = self._spurious_ahead(i - e0)
+                if c is None:
+                    self.error, stop = exc, i
+                    break
+                # a spurious pulse not yet handed out: dropped, the revolution checked again
+                self.dropped.append((float(edges[c]), int(self._edge_lines[c])))
+                self._edges, self._edge_lines = np.delete(edges, c), np.delete(self._edge_lines, c)
+                edges = self._edges
+                self._n_edges -= 1
+                last -= 1
+                stop = min(stop, last if final else last - SPLINE_HALF_WINDOW)
+                continue
+            i += 1
         if stop <= self._next:
             return self._empty()
         t_end = edges[stop - e0]
@@ -470,6 +556,24 @@ class KeyphasorTracker:
         self._edge_lines = self._edge_lines[drop:]
         self._e0 += drop
         return out
+
+    def _spurious_ahead(self, j: int) -> int | None:
+        """A spurious pulse among those ahead of revolution ``j`` of the window (none handed
+        out yet) whose removal leaves it regular and the revolution it merges within
+        :data:`SPURIOUS_RATIO` (the batch path's :func:`drop_spurious_pulses`, causal);
+        ``None`` where none is, or the record's share of dropped pulses is used up."""
+        if len(self.dropped) >= max(1, int(MAX_SPURIOUS_SHARE * self._n_edges)):
+            return None
+        edges = self._edges
+        best, best_gap = None, math.inf
+        for c in range(j + 1, min(j + 1 + SPLINE_HALF_WINDOW + 1, len(edges) - 1)):
+            trial = np.delete(edges, c)
+            ratio = period_ratio(trial, c - 1)
+            if ratio is None or not SPURIOUS_RATIO[0] <= ratio <= SPURIOUS_RATIO[1] or _irregular(trial, j):
+                continue
+            if abs(ratio - 1.0) < best_gap:
+                best, best_gap = c, abs(ratio - 1.0)
+        return best
 
     def _empty(self):
         p = self._held_p.shape[1] if self._held_p is not None else 0

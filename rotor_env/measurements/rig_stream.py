@@ -54,7 +54,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from .core import COLUMNS
 from .files import MeasurementError, check_finite, check_time, first_step
-from .keyphasor import KeyphasorError, KeyphasorTracker, check_once_per_turn
+from .keyphasor import KeyphasorError, KeyphasorTracker, check_once_per_turn, spurious_note
 from .probes import probe_matrix
 from .rig import SPEED_UNITS, TIME_UNITS, Rig
 from .stream import CHUNK_BYTES, SlidingDerivatives, StreamReader
@@ -350,7 +350,8 @@ class RigStream:
 
     @property
     def notes(self) -> list[str]:
-        return list(self._origin.notes)
+        dropped = getattr(self._spin, "dropped", [])
+        return list(self._origin.notes) + ([spurious_note(dropped)] if dropped else [])
 
     # ------------------------------------------------------------------ the stream
     def __iter__(self) -> Iterator[np.ndarray]:

@@ -270,10 +270,11 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
     t = data[:, col[rig.time]] * TIME_UNITS[rig.time_unit]
     dt = check_time(path, t, lines, column=rig.time, unit=" s", error=WaveformError)
     step = np.diff(t)
+    notes: list[str] = []
     if rig.keyphasor is not None:
         try:
             edges = pulse_edges(t, data[:, col[rig.keyphasor]], rig.keyphasor_threshold,
-                                where=f"{path}, column {rig.keyphasor!r}", lines=lines)
+                                where=f"{path}, column {rig.keyphasor!r}", lines=lines, notes=notes)
         except KeyphasorError as exc:
             raise WaveformError(str(exc)) from None
         # fewer than 8 samples a turn: the pulse edges (and the 1X) are aliased
@@ -304,7 +305,7 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
     r_rig = rig if rig.displacement not in ("V", "mV") else replace(rig, displacement="um",
                                                                    sensitivity_mv_per_um=None)
     u, v = to_model_axes(r_rig, readings)
-    rec = RigRecord(r_rig, t[inside], phi, speed, accel, readings, u, v, str(path))
+    rec = RigRecord(r_rig, t[inside], phi, speed, accel, readings, u, v, str(path), tuple(notes))
     if rig.slow_roll_rpm is not None:
         rec = rec.compensate_runout(below_rpm=rig.slow_roll_rpm)
     return rec
