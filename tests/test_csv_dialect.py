@@ -124,3 +124,33 @@ def test_the_stream_reader_reads_every_dialect(tmp_path, delimiter, decimal):
     b = np.concatenate(list(StreamReader(other, chunk_bytes=4096)))
     np.testing.assert_array_equal(a, b)
     assert a.shape == (len(data), 10)
+
+
+@pytest.mark.parametrize(("fs", "decimals"), [(51200.0, 6), (25600.0, 6), (12800.0, 5)])
+def test_times_written_with_too_few_decimals_are_the_grid_they_were_rounded_from(tmp_path, fs, decimals):
+    """Acquisition software and spreadsheets write the time column to a fixed number of
+    decimals: at 51.2 kHz to the microsecond the steps read 19 and 20 us.  Read back as the
+    uniform grid with a note; a missing sample is still refused."""
+    from rotor_env.measurements.waveforms import WaveformError
+
+    (tmp_path / "rig.yaml").write_text(ONE_PLANE)
+    rig = load_rig(tmp_path / "rig.yaml")
+    n = 20000
+    t = np.arange(n) / fs
+    phi = 2 * np.pi * 25.0 * t + np.pi * 10.0 * t * t
+    kp = np.where((phi / (2 * np.pi)) % 1.0 < 0.03, -5.0, 0.0)
+    x, y = 50.0 * np.cos(phi), 50.0 * np.sin(phi)
+    rows = [f"{ti:.{decimals}f},{k:g},{a:.6f},{b:.6f}" for ti, k, a, b in zip(t, kp, x, y, strict=True)]
+    path = tmp_path / "run.csv"
+    path.write_text("t,kp,x,y\n" + "\n".join(rows) + "\n")
+    rec = load_waveforms(path, rig)
+    first = int(np.searchsorted(t, rec.t[0] - 0.5 / fs))
+    # the least-squares line through the rounded times: uniform, within a thousandth of the
+    # resolution of the times they were rounded from
+    np.testing.assert_allclose(rec.t, t[first:first + len(rec.t)], rtol=0, atol=1e-3 * 10.0 ** -decimals)
+    assert np.ptp(np.diff(rec.t)) < 1e-9 / fs
+    assert any(f"the times are written to {10.0 ** -decimals:g} s" in m for m in rec.notes), rec.notes
+    # one sample missing: a gap the rounding cannot explain
+    path.write_text("t,kp,x,y\n" + "\n".join(rows[:5000] + rows[5001:]) + "\n")
+    with pytest.raises(WaveformError, match="non-uniform sampling"):
+        load_waveforms(path, rig)

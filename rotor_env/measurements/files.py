@@ -53,6 +53,7 @@ __all__ = [
     "first_step",
     "load_measurements",
     "read_table",
+    "restore_rounded_time",
 ]
 
 REQUIRED: tuple[str, ...] = ("t", "phi", "theta_x", "theta_y")
@@ -155,6 +156,46 @@ def check_time(source, t: np.ndarray, lines=None, *, step: float | None = None, 
                              f"{_num(diff[j])}{unit} where the record's step is {_num(step)}{unit} (samples missing?)",
                       r)
     return step
+
+
+def _decimal_quantum(t: np.ndarray) -> float | None:
+    """The resolution the times were written with: the largest ``10^-d`` (d = 0..12) of which
+    every time is a whole multiple (to 1e-6 of it); ``None`` where none is."""
+    for d in range(13):
+        s = t * 10.0**d
+        if np.all(np.abs(s - np.round(s)) <= 1e-6):
+            return 10.0**-d
+    return None
+
+
+def restore_rounded_time(t: np.ndarray, unit: str = "") -> tuple[np.ndarray, str]:
+    """Times written with too few decimals for their step (51.2 kHz, ``dt`` = 19.53125 us,
+    written to the microsecond: steps of 19 and 20 us) -> the uniform grid they were rounded
+    from, and a note; ``t`` itself and ``""`` where they are uniform already, or are not such
+    a grid: every time within half the written resolution of the least-squares line through
+    them, and that resolution under half a step (a missing sample, a jump, stays an error of
+    :func:`check_time`)."""
+    t = np.asarray(t, dtype=float)
+    diff = np.diff(t)
+    if diff.size < 2 or not (diff > 0).all():
+        return t, ""
+    step = float(np.median(diff))
+    if not (np.abs(diff - step) > UNIFORM_RTOL * step).any():
+        return t, ""
+    q = _decimal_quantum(t)
+    if q is None:
+        return t, ""
+    k = np.arange(t.size, dtype=float)
+    dt, t0 = np.polyfit(k, t, 1)
+    grid = t0 + k * dt
+    # half the resolution, and a hair for the line's own error at a tie (x.5 rounded); a
+    # missing sample puts the line half a step off, more than that since q < step / 2
+    tol = 0.51 * q
+    if not (q < 0.5 * dt and float(np.max(np.abs(t - grid))) <= tol):
+        return t, ""
+    rate = f", {1.0 / dt:.6g} Hz" if unit.strip() == "s" else ""
+    return grid, (f"the times are written to {q:g}{unit} for a step of {dt:.6g}{unit}{rate}: read as the uniform "
+                  f"grid they were rounded from (each within half of {q:g}{unit})")
 
 
 def first_step(t: np.ndarray, previous: float = math.nan) -> float:
@@ -480,7 +521,10 @@ def load_measurements(path: str | os.PathLike, *, min_rows: int = MIN_ROWS) -> M
     idx = {h: i for i, h in enumerate(header)}
     present = [c for c in COLUMNS if c in idx]
     check_finite(path, data[:, [idx[c] for c in present]], present, lines)
-    t = data[:, idx["t"]]
+    t, rounded = restore_rounded_time(data[:, idx["t"]])
+    if rounded:
+        data[:, idx["t"]] = t
+        notes.append(rounded)
     check_time(path, t, lines)
     out = np.empty((data.shape[0], len(COLUMNS)))
     for j, c in enumerate(COLUMNS):

@@ -237,7 +237,7 @@ MAX_SLOW_ROLL_SHARE = 0.5
 
 def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
     """Read a waveform file (CSV or Parquet) as the rig describes it."""
-    from .files import MeasurementError, check_finite, check_time, read_table
+    from .files import MeasurementError, check_finite, check_time, read_table, restore_rounded_time
 
     path = Path(path)
     try:
@@ -267,10 +267,12 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
             raise WaveformError(f"{path}, line {lines[r]}, column {p.name!r}: reading {float(data[r, col[p.name]])!r} "
                                 f"{rig.displacement} is beyond a displacement probe's range ({MAX_PROBE_M * 1e3:g} mm): "
                                 f"is units.displacement ({rig.displacement}) in {rig.source} right?")
-    t = data[:, col[rig.time]] * TIME_UNITS[rig.time_unit]
+    notes: list[str] = []
+    t, rounded = restore_rounded_time(data[:, col[rig.time]] * TIME_UNITS[rig.time_unit], " s")
+    if rounded:
+        notes.append(rounded)
     dt = check_time(path, t, lines, column=rig.time, unit=" s", error=WaveformError)
     step = np.diff(t)
-    notes: list[str] = []
     if rig.keyphasor is not None:
         try:
             edges = pulse_edges(t, data[:, col[rig.keyphasor]], rig.keyphasor_threshold,
