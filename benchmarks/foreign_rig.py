@@ -24,7 +24,8 @@ forces in newtons; the shaft's elastic force is written in the shaft's own body 
 
 Spin.  A constant-acceleration run-up or coast-down between 0.3 and 1.8 times the critical
 (``fn``) in 8-11 s (drawn):  ``phi(t) = phi0 + W0 t + alpha t^2 / 2``,  ``W = W0 + alpha t``;
-with ``--profile motor`` the same end speeds reached as a motor drives a rotor, fast at first
+with ``--profile updown`` the run-up (or coast-down) followed by a dwell and the way back in one
+record; with ``--profile motor`` the same end speeds reached as a motor drives a rotor, fast at first
 and slowly at the end (``W = W0 + K (1 - exp(-2 t / duration))``, :func:`spin`).
 Before ``t = 0`` the rotor turns at ``W0`` for ``min(5 / (zeta wn), 8 s)`` (started at the
 isotropic rotor's steady state) so that the record starts settled.  ``phi`` is the angle of a
@@ -266,11 +267,36 @@ def _spin_scalar(r: Rotor):
             return phi0 + W0 * t + K * (t - T * (1.0 - ex)), W0 + K * (1.0 - ex), K * ex / T
         return at
 
+    if r.profile == "updown":
+        def at_updown(t: float) -> tuple[float, float, float]:
+            if t <= 0:
+                return phi0 + W0 * t, W0, 0.0
+            ph, W, a = _updown(phi0, W0, A, r.duration, t)
+            return float(ph), float(W), float(a)
+        return at_updown
+
     def at_linear(t: float) -> tuple[float, float, float]:
         if t <= 0:
             return phi0 + W0 * t, W0, 0.0
         return phi0 + W0 * t + 0.5 * A * t * t, W0 + A * t, A
     return at_linear
+
+
+def _updown(phi0: float, W0: float, A: float, duration: float, tp):
+    """The "updown" profile at ``tp >= 0``: from ``W0`` to ``W0 + A duration`` in the first 45 %
+    of the record, held for 10 %, back to ``W0`` in the last 45 % (a test run's start-up, dwell
+    and coast-down in one file)."""
+    t1, t2 = 0.45 * duration, 0.55 * duration
+    rate = A * duration / t1
+    w1 = W0 + A * duration
+    tp = np.asarray(tp, dtype=float)
+    up = np.minimum(tp, t1)
+    hold = np.clip(tp - t1, 0.0, t2 - t1)
+    down = np.maximum(tp - t2, 0.0)
+    ph = phi0 + W0 * up + 0.5 * rate * up * up + w1 * hold + w1 * down - 0.5 * rate * down * down
+    W = np.where(tp <= t1, W0 + rate * tp, np.where(tp <= t2, w1, w1 - rate * down))
+    a = np.where(tp < t1, rate, np.where(tp <= t2, 0.0, -rate))
+    return ph, W, a
 
 
 def spin(phi0: float, W0: float, A: float, duration: float, profile: str, t):
@@ -281,6 +307,9 @@ def spin(phi0: float, W0: float, A: float, duration: float, profile: str, t):
     the end (an induction motor's run-up against its load; a coast-down against drag)."""
     tp = np.where(np.asarray(t) > 0, t, 0.0)
     neg = np.asarray(t) - tp
+    if profile == "updown":
+        ph, W, a = _updown(phi0, W0, A, duration, tp)
+        return ph + W0 * neg, W, np.where(np.asarray(t) > 0, a, 0.0)
     if profile == "motor":
         T = 0.5 * duration
         K = A * duration / (1.0 - math.exp(-2.0))
@@ -906,8 +935,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fs", type=float, default=None, help="sample rate, Hz (default drawn per case)")
     ap.add_argument("--colour", type=float, default=0.0, help="AR(1) coefficient of an added coloured noise")
     ap.add_argument("--crack-law", choices=("mayes", "gasch"), default="mayes")
-    ap.add_argument("--profile", choices=("linear", "motor"), default="linear",
-                    help="the speed's course: constant acceleration, or a motor's (fast first, slow at the end)")
+    ap.add_argument("--profile", choices=("linear", "motor", "updown"), default="linear",
+                    help="the speed's course: constant acceleration, a motor's (fast first, slow at the end), or "
+                         "updown (there, a dwell, and back in one record)")
     ap.add_argument("--keep", default=None, help="folder to keep the written records in")
     ap.add_argument("--out", default=None, help="JSON of every outcome")
     args = ap.parse_args(argv)

@@ -635,4 +635,59 @@ def smooth_spin(t: np.ndarray, phi: np.ndarray, *, with_error: bool = False):
             best_err = math.sqrt(rss / len(x) * (len(inner) + 4) / len(x))
     if best is None:
         return (phi, np.gradient(phi, t), None) if with_error else (phi, np.gradient(phi, t))
+    best, best_err = _refine_corners(best, best_bic, best_err, x, y, edges)
     return (best(t), best(t, 1), best_err) if with_error else (best(t), best(t, 1))
+
+
+#: a pulse the spin's spline misses by more than this many times the pulses' jitter (their
+#: misfit's robust spread) lies where the speed's course bends within a knot interval
+CORNER_SIGMAS = 5.0
+#: rounds of local refinement at most (each halves the knot intervals where the spline misses:
+#: from 256 revolutions to 2 in seven)
+CORNER_ROUNDS = 8
+
+
+def _refine_corners(spl, bic: float, err: float, x: np.ndarray, y: np.ndarray, edges: np.ndarray):
+    """The spin's spline with knots added where it misses the pulses by far more than their
+    jitter: an acceleration that changes within a knot interval (a drive reaching its set
+    speed and holding it, a trip, a coast-down starting) -- a uniform spacing chosen for the
+    whole run bends too slowly there (a hold at 3000 rpm after a 1000 rpm/s run-up: 14 mrad
+    off at the corner, every pulse exact).  The knot intervals around such pulses (and their
+    neighbours) are halved, round by round, while the BIC falls."""
+    from scipy.interpolate import make_lsq_spline
+
+    n = len(x)
+    for _ in range(CORNER_ROUNDS):
+        res = spl(x) - y
+        sigma = max(1.4826 * float(np.median(np.abs(res - np.median(res)))), 1e-12)
+        inner = spl.t[4:-4]
+        # a pulse far off, or a quarter of a knot interval's worth of pulses off to one side
+        # together (a corner hidden in the jitter of each pulse shows in their mean; over a
+        # whole interval the least-squares fit makes it vanish)
+        w = max(2, int(round(0.25 * n / (len(inner) + 1))))
+        local = np.convolve(res, np.ones(w) / w, mode="same")
+        bad = np.nonzero((np.abs(res) > CORNER_SIGMAS * sigma)
+                         | (np.abs(local) > CORNER_SIGMAS * sigma / math.sqrt(w)))[0]
+        if not len(bad):
+            break
+        # the knot intervals around those pulses (and one either side) halved
+        bounds = np.concatenate([[x[0]], inner, [x[-1]]])
+        hit = np.unique(np.clip(np.searchsorted(bounds, x[bad]) - 1, 0, len(bounds) - 2))
+        hit = np.unique(np.clip(np.concatenate([hit - 1, hit, hit + 1]), 0, len(bounds) - 2))
+        mids = 0.5 * (bounds[hit] + bounds[hit + 1])
+        # an interval keeps at least two pulses on each side of its new knot
+        count = np.searchsorted(x, bounds[hit + 1]) - np.searchsorted(x, bounds[hit])
+        mids = mids[count >= 4]
+        if not len(mids):
+            break
+        new = np.sort(np.concatenate([inner, mids]))
+        try:
+            cand = make_lsq_spline(x, y, np.concatenate([[x[0]] * 4, new, [x[-1]] * 4]), k=3)
+        except (ValueError, np.linalg.LinAlgError):
+            break
+        rss = float(np.sum((cand(x) - y) ** 2))
+        cand_bic = n * math.log(max(rss / n, 1e-300)) + (len(new) + 4) * math.log(n)
+        if not cand_bic < bic:
+            break
+        spl, bic, err = cand, cand_bic, math.sqrt(rss / n * (len(new) + 4) / n)
+    return spl, err
