@@ -9,6 +9,14 @@ translation there (the Jeffcott model); two planes give the disk's tilt
 
 The probes' DC gap (the static position) is removed: the model's origin is the mean
 position over the record.
+
+What a probe's signal must hold (:func:`check_probe_signals`, a clear error otherwise): a
+reading that moves (a flat channel is a disconnected probe or an unplugged input), no flat
+tops (a probe or driver driven out of its linear range, an input range exceeded, clips the
+orbit, which no rotor model follows), and the shaft's once-per-turn vibration: two probes of
+a plane see one orbit, each its projection, so their 1X amplitudes differ by the orbit's
+ellipticity; a probe whose largest 1X stays under :data:`MIN_1X_SHARE` of its partner's all
+through the run reads noise alone (a broken cable, a probe not facing the shaft).
 """
 
 from __future__ import annotations
@@ -17,7 +25,14 @@ import numpy as np
 
 from .rig import Rig
 
-__all__ = ["plane_displacements", "probe_matrix", "to_model_axes"]
+__all__ = ["check_probe_signals", "plane_displacements", "probe_matrix", "to_model_axes"]
+
+#: samples at a channel's largest (or smallest) value, as a share of the record, beyond which
+#: its tops are flat (clipped) -- and at least this many, in runs of three or more
+CLIP_SHARE = 1e-3
+CLIP_SAMPLES = 10
+#: a probe whose largest 1X stays under this share of its plane partner's reads noise alone
+MIN_1X_SHARE = 1.0 / 30.0
 
 
 def probe_matrix(angles: np.ndarray) -> np.ndarray:
@@ -47,3 +62,45 @@ def to_model_axes(rig: Rig, readings: dict[str, np.ndarray]) -> tuple[np.ndarray
     dz = rig.planes[pb] - rig.planes[pa]
     tilt = (wb - wa) / dz
     return tilt[:, 0], tilt[:, 1]
+
+
+def check_probe_signals(where: str, rig: Rig, readings: dict[str, np.ndarray], phi: np.ndarray,
+                        lines: np.ndarray | None = None, error: type[Exception] = ValueError) -> None:
+    """Refuse a probe that reads nothing, clips or holds no 1X (module docstring); ``readings``
+    in the rig's unit at the samples of the spin angle ``phi``; ``lines``: their file lines."""
+    from .keyphasor import order_amplitudes
+
+    unit = rig.displacement
+    for p in rig.probes:
+        x = np.asarray(readings[p.name], dtype=float)
+        lo, hi = float(np.min(x)), float(np.max(x))
+        if not hi > lo:
+            raise error(f"{where}, column {p.name!r}: the reading is {lo:g} {unit} on every row: a disconnected "
+                        "probe or input (an orbit needs every probe of its plane)")
+        for value, side in ((hi, "largest"), (lo, "smallest")):
+            at = x == value
+            count = int(np.count_nonzero(at))
+            if count < max(CLIP_SAMPLES, CLIP_SHARE * len(x)):
+                continue
+            # in runs of three or more: a flat top, not a quantised peak touched now and then
+            runs = at[:-2] & at[1:-1] & at[2:]
+            if np.count_nonzero(runs) * 3 < count:
+                continue
+            r = int(np.argmax(runs))
+            line = f", line {int(lines[r])}" if lines is not None else ""
+            raise error(f"{where}{line}, column {p.name!r}: {count} samples ({100 * count / len(x):.2g} %) sit at the "
+                        f"reading's {side} value {value:g} {unit}, in flat runs: the probe, its driver or the input "
+                        "range clipped the orbit (out of its linear range); set the gap or the range and record again")
+    for plane in rig.plane_names:
+        members = [p for p in rig.probes if p.plane == plane]
+        if len(members) < 2:
+            continue
+        one = {p.name: float(np.max(order_amplitudes(phi, readings[p.name], (1,))[:, 0], initial=0.0))
+               for p in members}
+        top = max(one.values())
+        for name, a in one.items():
+            if top > 0 and a < MIN_1X_SHARE * top:
+                other = max(one, key=one.get)
+                raise error(f"{where}, column {name!r}: its largest once-per-turn vibration is {a:.3g} {unit} against "
+                            f"{top:.3g} {unit} on {other!r} of the same plane: it reads noise alone (a broken cable, "
+                            "a probe not facing the shaft, the wrong column)")

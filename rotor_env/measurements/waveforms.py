@@ -34,7 +34,7 @@ from .keyphasor import (
     smooth_spin,
     spin_from_pulses,
 )
-from .probes import to_model_axes
+from .probes import check_probe_signals, to_model_axes
 from .rig import SPEED_UNITS, TIME_UNITS, Rig
 from .vectors import VectorTable, keyphasor_phase_error, order_track
 
@@ -300,6 +300,8 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
         raise WaveformError(f"{path}: the shaft's top speed would be {top:.4g} rpm (time in {rig.time_unit}, column "
                             f"{rig.time!r}), outside any rotor's run-up ({MIN_TOP_RPM:g} to {MAX_RPM:g} rpm): is "
                             f"units.time in {rig.source} right (ms or µs read as s)?")
+    check_probe_signals(str(path), rig, {p.name: data[inside, col[p.name]] for p in rig.probes}, phi,
+                        lines[inside], error=WaveformError)
     readings = {}
     for p in rig.probes:
         x = data[inside, col[p.name]]

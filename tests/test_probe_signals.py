@@ -1,0 +1,85 @@
+"""A probe that reads nothing, clips, or reads noise alone is refused by name (the file, the
+column, the line); a healthy probe's signal -- quantised by a 12- or 16-bit converter, in volts
+on a gap, with the probes' noise -- passes (``measurements.probes.check_probe_signals``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rotor_env.measurements.rig import load_rig
+from rotor_env.measurements.waveforms import WaveformError, load_waveforms
+from rotor_env.params import RotorParams
+from rotor_env.rig_simulation import simulate_rig
+
+ONE_PLANE = "keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n"
+VOLTS = "keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: V, sensitivity_mv_per_um: 7.87}\n"
+
+
+@pytest.fixture(scope="module")
+def record(tmp_path_factory):
+    """A cracked rotor's run-up through its critical (peak about 100 um), 0.3 um probe noise."""
+    folder = tmp_path_factory.mktemp("probes")
+    (folder / "rig.yaml").write_text(ONE_PLANE)
+    rig = load_rig(folder / "rig.yaml")
+    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6, "D": 0.03, "D_axis": 0.5},
+                         effects=("stiffness", "viscous_damping", "unbalance", "asymmetry"))
+    cols = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=600.0, rpm_to=2700.0, rpm_per_s=600.0,
+                        noise=0.3, seed=5, sample_rate=5000.0).file_columns()
+    return folder, rig, {k: np.asarray(v, dtype=float) for k, v in cols.items()}
+
+
+def _write(folder, name, cols):
+    path = folder / name
+    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="",
+               fmt="%.10g")
+    return path
+
+
+def test_a_flat_channel_is_a_disconnected_probe(record):
+    folder, rig, cols = record
+    path = _write(folder, "dead.csv", {**cols, "y": np.zeros_like(cols["y"])})
+    with pytest.raises(WaveformError, match=r"dead\.csv, column 'y': the reading is 0 um on every row: a "
+                                            r"disconnected probe"):
+        load_waveforms(path, rig)
+
+
+def test_a_probe_reading_noise_alone_is_refused(record):
+    folder, rig, cols = record
+    noise = np.random.default_rng(0).normal(0.0, 0.3, cols["y"].size)
+    path = _write(folder, "noise.csv", {**cols, "y": noise})
+    with pytest.raises(WaveformError, match=r"noise\.csv, column 'y': its largest once-per-turn vibration is "
+                                            r"[0-9.]+ um against [0-9.]+ um on 'x' of the same plane: it reads noise"):
+        load_waveforms(path, rig)
+
+
+@pytest.mark.parametrize(("share", "side"), [(0.6, "largest"), (0.8, "smallest")])
+def test_a_clipped_orbit_is_refused_with_its_line(record, share, side):
+    folder, rig, cols = record
+    peak = np.abs(cols["x"] - cols["x"].mean()).max()
+    x = cols["x"].copy()
+    if side == "largest":
+        x = np.minimum(x, x.mean() + share * peak)
+    else:
+        x = np.maximum(x, x.mean() - share * peak)
+    path = _write(folder, f"clip_{side}.csv", {**cols, "x": x})
+    with pytest.raises(WaveformError) as exc:
+        load_waveforms(path, rig)
+    msg = str(exc.value)
+    assert "column 'x'" in msg and f"reading's {side} value" in msg and "clipped the orbit" in msg
+    line = int(msg.split("line ")[1].split(",")[0])
+    assert x[line - 2] == (x.max() if side == "largest" else x.min())  # the line named is a clipped sample
+
+
+@pytest.mark.parametrize("bits", [12, 16])
+def test_quantised_and_volt_records_pass(record, tmp_path, bits):
+    """A converter's steps (12 bits over +-10 V: 0.62 um a step at 7.87 mV/um) repeat the peak's
+    value a few samples: no flat top; probes in volts on a -10 V gap read as before."""
+    _, _, cols = record
+    (tmp_path / "rig.yaml").write_text(VOLTS)
+    rig = load_rig(tmp_path / "rig.yaml")
+    step = 20.0 / 2**bits
+    volts = {k: np.round((-10.0 + 7.87e-3 * cols[k]) / step) * step for k in ("x", "y")}
+    path = _write(tmp_path, "volts.csv", {**cols, **volts})
+    rec = load_waveforms(path, rig)
+    assert np.ptp(rec.u) > 0 and len(rec.t) > 1000
