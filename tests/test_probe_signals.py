@@ -83,3 +83,25 @@ def test_quantised_and_volt_records_pass(record, tmp_path, bits):
     path = _write(tmp_path, "volts.csv", {**cols, **volts})
     rec = load_waveforms(path, rig)
     assert np.ptp(rec.u) > 0 and len(rec.t) > 1000
+
+
+def test_a_table_whose_probe_reads_noise_alone_is_refused(record, tmp_path):
+    """The same rule on an order-tracked table of one plane (probe angles from the rig file)."""
+    from rotor_env.measurements.vectors import VectorTableError, load_vector_table
+
+    folder, rig, cols = record
+    path = _write(folder, "for_table.csv", cols)
+    table = load_waveforms(path, rig).vectors((1,))
+    table.to_csv(tmp_path / "table.csv")
+    angles = {"x": 45.0, "y": -45.0}
+    load_vector_table(tmp_path / "table.csv", angles=angles)  # healthy: read
+    text = (tmp_path / "table.csv").read_text().splitlines()
+    head = text[0].split(",")
+    j = head.index("y_amp")
+    rows = [r.split(",") for r in text[1:]]
+    for r in rows:
+        r[j] = repr(float(r[j]) * 1e-3)
+    (tmp_path / "dead.csv").write_text("\n".join([text[0], *(",".join(r) for r in rows)]) + "\n")
+    with pytest.raises(VectorTableError, match=r"dead\.csv, column 'y_amp': its largest 1X amplitude is .* it reads "
+                                               r"noise alone"):
+        load_vector_table(tmp_path / "dead.csv", angles=angles)

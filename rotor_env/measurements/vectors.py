@@ -622,6 +622,18 @@ def load_vector_table(
             raise VectorTableError(f"{path}: probe(s) {missing} of the table are not in the rig description "
                                    f"(it has {sorted(angles)})")
         ang = np.radians([angles[p] for p in names])
+        # the probes of one plane see one orbit: one whose 1X stays far under the others' reads
+        # noise alone (the waveforms' check, measurements.probes)
+        from .probes import MIN_1X_SHARE
+
+        top = np.nanmax(np.abs(vectors[1]), axis=0)
+        if len(names) > 1 and np.nanmax(top) > 0:
+            j = int(np.argmin(top))
+            if top[j] < MIN_1X_SHARE * np.nanmax(top):
+                raise VectorTableError(f"{path}, column {names[j] + '_amp'!r}: its largest 1X amplitude is "
+                                       f"{top[j] / to_peak:.3g} against {np.nanmax(top) / to_peak:.3g} on "
+                                       f"{names[int(np.argmax(top))]!r} of the same plane: it reads noise alone "
+                                       "(a broken cable, a probe not facing the shaft, the wrong column)")
     runs = None
     if labels is not None:
         runs = []
