@@ -135,3 +135,44 @@ def pytest_collection_modifyitems(config, items):
     rank = {name: i for i, name in enumerate(HEAVY_FIRST)}
     # a stable sort: the order inside each module is kept
     items.sort(key=lambda item: rank.get(item.path.stem, len(HEAVY_FIRST)))
+
+
+# ------------------------------------------------------------------ rig records for the reader tests
+#: the README's one-plane rig: an X-Y pair at +-45 deg in um and a keyphasor
+ONE_PLANE_RIG = "keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n"
+
+
+def _one_plane_run(folder, extra: dict | None = None, *, rpm=(300.0, 3000.0), rpm_per_s=300.0, noise=0.3,
+                   seed=1, sample_rate=5000.0):
+    """``(rig, columns, run)``: the one-plane rig written to ``folder/rig.yaml`` and a run-up of
+    a rotor (damping 0.04, unbalance 0.005 at 0.6 rad, natural frequency 1650 rpm) with the
+    effects whose values ``extra`` gives (``{"D": 0.03, ...}``: the effects named from them),
+    as the rig records it (time in s, keyphasor, probes in um; float arrays), and the
+    simulated run (:class:`rotor_env.rig_simulation.RigRun`)."""
+    from rotor_env.effects import EFFECTS
+    from rotor_env.measurements.rig import load_rig
+    from rotor_env.params import RotorParams
+    from rotor_env.rig_simulation import simulate_rig
+
+    (folder / "rig.yaml").write_text(ONE_PLANE_RIG)
+    rig = load_rig(folder / "rig.yaml")
+    extra = dict(extra or {})
+    effects = ["stiffness", "viscous_damping", "unbalance"]
+    effects += [n for n, e in EFFECTS.items() if n not in effects and any(p.name in extra for p in e.parameters)]
+    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6, **extra}, effects=tuple(effects))
+    run = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=rpm[0], rpm_to=rpm[1], rpm_per_s=rpm_per_s,
+                       noise=noise, seed=seed, sample_rate=sample_rate)
+    return rig, {k: np.asarray(v, dtype=float) for k, v in run.file_columns().items()}, run
+
+
+def _write_columns(path, columns: dict) -> object:
+    """``columns`` as a plain CSV (header line, commas, ten significant digits); ``path``."""
+    np.savetxt(path, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns),
+               comments="", fmt="%.10g")
+    return path
+
+
+@pytest.fixture(scope="session")
+def rig_records() -> SimpleNamespace:
+    """``one_plane_run(folder, extra, ...)`` and ``write_csv(path, columns)`` (see above)."""
+    return SimpleNamespace(one_plane_run=_one_plane_run, write_csv=_write_columns, ONE_PLANE=ONE_PLANE_RIG)

@@ -15,9 +15,7 @@ from rotor_env.measurements.rig import load_rig
 from rotor_env.measurements.vectors import load_vector_table
 from rotor_env.measurements.waveforms import load_waveforms
 from rotor_env.params import RotorParams
-from rotor_env.rig_simulation import simulate_rig
 
-ONE_PLANE = "keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n"
 #: (delimiter, decimal) of the exports tried
 DIALECTS = [(",", "."), (";", "."), (";", ","), ("\t", "."), ("\t", ",")]
 
@@ -36,18 +34,12 @@ def _rewrite(src, dst, delimiter: str, decimal: str, *, bom: bool = False, blank
 
 
 @pytest.fixture(scope="module")
-def record(tmp_path_factory):
+def record(tmp_path_factory, rig_records):
     """A short rig record (probes in um, keyphasor) and its 1X table, as plain CSV."""
     folder = tmp_path_factory.mktemp("dialect")
-    (folder / "rig.yaml").write_text(ONE_PLANE)
-    rig = load_rig(folder / "rig.yaml")
-    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6}, effects=("stiffness",
-                         "viscous_damping", "unbalance"))
-    run = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=600.0, rpm_to=2400.0, rpm_per_s=600.0,
-                       noise=0.3, seed=3, sample_rate=2500.0)
-    cols = run.file_columns()
-    np.savetxt(folder / "run.csv", np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols),
-               comments="", fmt="%.10g")
+    rig, cols, run = rig_records.one_plane_run(folder, rpm=(600.0, 2400.0), rpm_per_s=600.0, seed=3,
+                                               sample_rate=2500.0)
+    rig_records.write_csv(folder / "run.csv", cols)
     run.vectors(rig, (1,)).to_csv(folder / "table.csv")
     return folder, rig
 
@@ -127,13 +119,14 @@ def test_the_stream_reader_reads_every_dialect(tmp_path, delimiter, decimal):
 
 
 @pytest.mark.parametrize(("fs", "decimals"), [(51200.0, 6), (25600.0, 6), (12800.0, 5)])
-def test_times_written_with_too_few_decimals_are_the_grid_they_were_rounded_from(tmp_path, fs, decimals):
+def test_times_written_with_too_few_decimals_are_the_grid_they_were_rounded_from(tmp_path, rig_records, fs,
+                                                                                decimals):
     """Acquisition software and spreadsheets write the time column to a fixed number of
     decimals: at 51.2 kHz to the microsecond the steps read 19 and 20 us.  Read back as the
     uniform grid with a note; a missing sample is still refused."""
     from rotor_env.measurements.waveforms import WaveformError
 
-    (tmp_path / "rig.yaml").write_text(ONE_PLANE)
+    (tmp_path / "rig.yaml").write_text(rig_records.ONE_PLANE)
     rig = load_rig(tmp_path / "rig.yaml")
     n = 20000
     t = np.arange(n) / fs

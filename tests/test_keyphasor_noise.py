@@ -11,24 +11,12 @@ import pytest
 
 from rotor_env.measurements import keyphasor
 from rotor_env.measurements.keyphasor import KeyphasorError, KeyphasorTracker, pulse_edges
-from rotor_env.measurements.rig import load_rig
-from rotor_env.params import RotorParams
-from rotor_env.rig_simulation import simulate_rig
-
-ONE_PLANE = "keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n"
 
 
 @pytest.fixture(scope="module")
-def clean(tmp_path_factory):
+def clean(tmp_path_factory, rig_records):
     """A run-up's keyphasor (a 5 V notch, its edge a sample or two wide) at 5 kHz."""
-    folder = tmp_path_factory.mktemp("kp")
-    (folder / "rig.yaml").write_text(ONE_PLANE)
-    rig = load_rig(folder / "rig.yaml")
-    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6},
-                         effects=("stiffness", "viscous_damping", "unbalance"))
-    run = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=300.0, rpm_to=3000.0, rpm_per_s=400.0,
-                       noise=0.3, seed=2, sample_rate=5000.0)
-    cols = run.file_columns()
+    _, cols, _ = rig_records.one_plane_run(tmp_path_factory.mktemp("kp"), rpm_per_s=400.0, seed=2)
     # an edge over a few samples, as a probe tip crossing a notch gives (first-order lag)
     kp = np.asarray(cols["kp"], dtype=float)
     slow = np.empty_like(kp)
@@ -93,36 +81,44 @@ def test_without_the_hysteresis_such_noise_is_read_as_extra_pulses(clean):
     assert refused >= 4
 
 
-@pytest.mark.parametrize("chunk", [97, 1000, 65536])
-def test_the_chunked_tracker_finds_the_batch_edges_on_a_noisy_keyphasor(clean, chunk):
-    t, kp = clean
-    noisy = kp + np.random.default_rng(5).normal(0.0, 0.4, kp.size)
-    batch = pulse_edges(t, noisy)
+def _track(t, signal, chunk):
+    """``signal`` through the monitor's tracker in chunks of ``chunk`` samples: the tracker,
+    and the times and angles it handed out."""
     tracker = KeyphasorTracker(where="kp")
     lines = np.arange(len(t)) + 2
     out_t, out_phi = [], []
     for lo in range(0, len(t), chunk):
         sl = slice(lo, lo + chunk)
-        got = tracker.push(t[sl], noisy[sl], noisy[sl], lines[sl])
+        got = tracker.push(t[sl], signal[sl], signal[sl], lines[sl])
         out_t.append(got[0])
         out_phi.append(got[1])
     got = tracker.finish()
-    out_t.append(got[0])
-    out_phi.append(got[1])
-    assert tracker.edges_seen == len(batch)
-    ts, phis = np.concatenate(out_t), np.concatenate(out_phi)
-    # each edge is where the handed-out angle passes a whole turn (the tracker's spline goes
-    # through its edges); its threshold is fixed from the first 2048 samples, the batch's from
-    # all: with noise they differ a little, and so do the edges (a third of a sample at the start,
-    # a twentieth later)
+    return tracker, np.concatenate([*out_t, got[0]]), np.concatenate([*out_phi, got[1]])
+
+
+def _turn_times(ts, phis, edges):
+    """Where the handed-out angle passes each whole turn, and the edge of ``edges`` each is
+    (the tracker's spline goes through its own edges)."""
     turns = np.arange(math.ceil(phis[0] / (2 * math.pi)), math.floor(phis[-1] / (2 * math.pi)) + 1)
     at = np.interp(2 * math.pi * turns, phis, ts)
-    dt = float(t[1] - t[0])
-    n = np.searchsorted(batch, at[0] - 0.5 * np.median(np.diff(batch))) - turns[0]  # the first edge's number
-    keep = (turns + n >= 0) & (turns + n < len(batch))
-    assert keep.sum() > 0.9 * len(batch)
-    diff = (at[keep] - batch[turns[keep] + n]) / dt
-    assert np.abs(diff).max() < 0.5, np.abs(diff).max()
+    n = np.searchsorted(edges, at[0] - 0.5 * np.median(np.diff(edges))) - turns[0]  # the first edge's number
+    keep = (turns + n >= 0) & (turns + n < len(edges))
+    assert keep.sum() > 0.9 * len(edges)
+    return at[keep], edges[turns[keep] + n]
+
+
+@pytest.mark.parametrize("chunk", [97, 1000, 65536])
+def test_the_chunked_tracker_finds_the_batch_edges_on_a_noisy_keyphasor(clean, chunk):
+    t, kp = clean
+    noisy = kp + np.random.default_rng(5).normal(0.0, 0.4, kp.size)
+    batch = pulse_edges(t, noisy)
+    tracker, ts, phis = _track(t, noisy, chunk)
+    assert tracker.edges_seen == len(batch)
+    # the tracker's threshold is fixed from the first 2048 samples, the batch's from all: with
+    # noise they differ a little, and so do the edges (a third of a sample at the start, a
+    # twentieth later)
+    at, ref = _turn_times(ts, phis, batch)
+    assert np.abs(at - ref).max() < 0.5 * (t[1] - t[0])
 
 
 def _spiked(t, kp, where):
@@ -165,44 +161,24 @@ def test_the_chunked_tracker_drops_the_same_spike(clean, chunk):
     edges = pulse_edges(t, kp)
     mid = 0.5 * (edges[60] + edges[61])
     spiked = _spiked(t, kp, [mid])
-    tracker = KeyphasorTracker(where="kp")
-    lines = np.arange(len(t)) + 2
-    out_t, out_phi = [], []
-    for lo in range(0, len(t), chunk):
-        sl = slice(lo, lo + chunk)
-        got = tracker.push(t[sl], spiked[sl], spiked[sl], lines[sl])
-        out_t.append(got[0])
-        out_phi.append(got[1])
-    got = tracker.finish()
-    ts, phis = np.concatenate([*out_t, got[0]]), np.concatenate([*out_phi, got[1]])
+    tracker, ts, phis = _track(t, spiked, chunk)
     assert tracker.edges_seen == len(edges)
     assert len(tracker.dropped) == 1 and abs(tracker.dropped[0][0] - mid) < 2 * (t[1] - t[0])
     # the handed-out angle is the clean record's: a whole turn at each clean edge
-    turns = np.arange(math.ceil(phis[0] / (2 * math.pi)), math.floor(phis[-1] / (2 * math.pi)) + 1)
-    at = np.interp(2 * math.pi * turns, phis, ts)
-    n = np.searchsorted(edges, at[0] - 0.5 * np.median(np.diff(edges))) - turns[0]
-    keep = (turns + n >= 0) & (turns + n < len(edges))
-    np.testing.assert_allclose(at[keep], edges[turns[keep] + n], rtol=0, atol=0.05 * (t[1] - t[0]))
+    at, ref = _turn_times(ts, phis, edges)
+    np.testing.assert_allclose(at, ref, rtol=0, atol=0.05 * (t[1] - t[0]))
 
 
-def test_the_record_and_the_monitors_stream_say_the_spike(tmp_path):
+def test_the_record_and_the_monitors_stream_say_the_spike(tmp_path, rig_records):
     """Through the readers a user meets: ``load_waveforms`` (diagnose) and ``RigStream`` (monitor)."""
     from rotor_env.measurements.rig_stream import RigStream
     from rotor_env.measurements.waveforms import load_waveforms
 
-    (tmp_path / "rig.yaml").write_text(ONE_PLANE)
-    rig = load_rig(tmp_path / "rig.yaml")
-    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6},
-                         effects=("stiffness", "viscous_damping", "unbalance"))
-    cols = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=300.0, rpm_to=2400.0, rpm_per_s=600.0,
-                        noise=0.3, seed=4, sample_rate=5000.0).file_columns()
+    rig, cols, _ = rig_records.one_plane_run(tmp_path, rpm=(300.0, 2400.0), rpm_per_s=600.0, seed=4)
     edges = pulse_edges(cols["t"], cols["kp"])
     k = int(np.searchsorted(cols["t"], 0.5 * (edges[30] + edges[31])))
-    cols["kp"] = np.array(cols["kp"], dtype=float)
     cols["kp"][k] = -5.0
-    path = tmp_path / "run.csv"
-    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="",
-               fmt="%.10g")
+    path = rig_records.write_csv(tmp_path / "run.csv", cols)
     crossing = 0.5 * (cols["t"][k - 1] + cols["t"][k])  # the spike's edge: halfway into it
     said = f"1 spurious keyphasor pulse dropped (t = {crossing:.6g} s, line {k + 2})"
     assert any(n.startswith(said) for n in load_waveforms(path, rig).notes)

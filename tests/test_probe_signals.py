@@ -9,52 +9,38 @@ import pytest
 
 from rotor_env.measurements.rig import load_rig
 from rotor_env.measurements.waveforms import WaveformError, load_waveforms
-from rotor_env.params import RotorParams
-from rotor_env.rig_simulation import simulate_rig
 
-ONE_PLANE = "keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n"
 VOLTS = "keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: V, sensitivity_mv_per_um: 7.87}\n"
 
 
 @pytest.fixture(scope="module")
-def record(tmp_path_factory):
+def record(tmp_path_factory, rig_records):
     """A cracked rotor's run-up through its critical (peak about 100 um), 0.3 um probe noise."""
     folder = tmp_path_factory.mktemp("probes")
-    (folder / "rig.yaml").write_text(ONE_PLANE)
-    rig = load_rig(folder / "rig.yaml")
-    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6, "D": 0.03, "D_axis": 0.5},
-                         effects=("stiffness", "viscous_damping", "unbalance", "asymmetry"))
-    cols = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=600.0, rpm_to=2700.0, rpm_per_s=600.0,
-                        noise=0.3, seed=5, sample_rate=5000.0).file_columns()
-    return folder, rig, {k: np.asarray(v, dtype=float) for k, v in cols.items()}
+    rig, cols, _ = rig_records.one_plane_run(folder, {"D": 0.03, "D_axis": 0.5}, rpm=(600.0, 2700.0),
+                                             rpm_per_s=600.0, seed=5)
+    return folder, rig, cols
 
 
-def _write(folder, name, cols):
-    path = folder / name
-    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="",
-               fmt="%.10g")
-    return path
-
-
-def test_a_flat_channel_is_a_disconnected_probe(record):
+def test_a_flat_channel_is_a_disconnected_probe(record, rig_records):
     folder, rig, cols = record
-    path = _write(folder, "dead.csv", {**cols, "y": np.zeros_like(cols["y"])})
+    path = rig_records.write_csv(folder / "dead.csv", {**cols, "y": np.zeros_like(cols["y"])})
     with pytest.raises(WaveformError, match=r"dead\.csv, column 'y': the reading is 0 um on every row: a "
                                             r"disconnected probe"):
         load_waveforms(path, rig)
 
 
-def test_a_probe_reading_noise_alone_is_refused(record):
+def test_a_probe_reading_noise_alone_is_refused(record, rig_records):
     folder, rig, cols = record
     noise = np.random.default_rng(0).normal(0.0, 0.3, cols["y"].size)
-    path = _write(folder, "noise.csv", {**cols, "y": noise})
+    path = rig_records.write_csv(folder / "noise.csv", {**cols, "y": noise})
     with pytest.raises(WaveformError, match=r"noise\.csv, column 'y': its largest once-per-turn vibration is "
                                             r"[0-9.]+ um against [0-9.]+ um on 'x' of the same plane: it reads noise"):
         load_waveforms(path, rig)
 
 
 @pytest.mark.parametrize(("share", "side"), [(0.6, "largest"), (0.8, "smallest")])
-def test_a_clipped_orbit_is_refused_with_its_line(record, share, side):
+def test_a_clipped_orbit_is_refused_with_its_line(record, rig_records, share, side):
     folder, rig, cols = record
     peak = np.abs(cols["x"] - cols["x"].mean()).max()
     x = cols["x"].copy()
@@ -62,7 +48,7 @@ def test_a_clipped_orbit_is_refused_with_its_line(record, share, side):
         x = np.minimum(x, x.mean() + share * peak)
     else:
         x = np.maximum(x, x.mean() - share * peak)
-    path = _write(folder, f"clip_{side}.csv", {**cols, "x": x})
+    path = rig_records.write_csv(folder / f"clip_{side}.csv", {**cols, "x": x})
     with pytest.raises(WaveformError) as exc:
         load_waveforms(path, rig)
     msg = str(exc.value)
@@ -72,7 +58,7 @@ def test_a_clipped_orbit_is_refused_with_its_line(record, share, side):
 
 
 @pytest.mark.parametrize("bits", [12, 16])
-def test_quantised_and_volt_records_pass(record, tmp_path, bits):
+def test_quantised_and_volt_records_pass(record, rig_records, tmp_path, bits):
     """A converter's steps (12 bits over +-10 V: 0.62 um a step at 7.87 mV/um) repeat the peak's
     value a few samples: no flat top; probes in volts on a -10 V gap read as before."""
     _, _, cols = record
@@ -80,17 +66,17 @@ def test_quantised_and_volt_records_pass(record, tmp_path, bits):
     rig = load_rig(tmp_path / "rig.yaml")
     step = 20.0 / 2**bits
     volts = {k: np.round((-10.0 + 7.87e-3 * cols[k]) / step) * step for k in ("x", "y")}
-    path = _write(tmp_path, "volts.csv", {**cols, **volts})
+    path = rig_records.write_csv(tmp_path / "volts.csv", {**cols, **volts})
     rec = load_waveforms(path, rig)
     assert np.ptp(rec.u) > 0 and len(rec.t) > 1000
 
 
-def test_a_table_whose_probe_reads_noise_alone_is_refused(record, tmp_path):
+def test_a_table_whose_probe_reads_noise_alone_is_refused(record, rig_records, tmp_path):
     """The same rule on an order-tracked table of one plane (probe angles from the rig file)."""
     from rotor_env.measurements.vectors import VectorTableError, load_vector_table
 
     folder, rig, cols = record
-    path = _write(folder, "for_table.csv", cols)
+    path = rig_records.write_csv(folder / "for_table.csv", cols)
     table = load_waveforms(path, rig).vectors((1,))
     table.to_csv(tmp_path / "table.csv")
     angles = {"x": 45.0, "y": -45.0}

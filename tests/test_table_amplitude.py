@@ -16,12 +16,7 @@ from rotor_env.balance.runs import Campaign, Plane
 from rotor_env.balance.simulate import DiskRotor, campaign_table, weight
 from rotor_env.cli import main
 from rotor_env.diagnosis.from_vectors import diagnose_vectors
-from rotor_env.measurements.rig import load_rig
 from rotor_env.measurements.vectors import VectorTableError, amplitude_unit, load_vector_table
-from rotor_env.params import RotorParams
-from rotor_env.rig_simulation import simulate_rig
-
-ONE_PLANE = "keyphasor: kp\nprobes: {x: 45, y: -45}\nunits: {displacement: um}\n"
 
 
 @pytest.mark.parametrize(("text", "expected"), [
@@ -52,16 +47,12 @@ def _rewrite(src, dst, factor: float) -> None:
 
 
 @pytest.fixture(scope="module")
-def tables(tmp_path_factory):
+def tables(tmp_path_factory, rig_records):
     """A bowed rotor's 1X table (a 4 um bow, 5 um unbalance; 0.3 um noise) written zero to peak,
     peak to peak and RMS."""
     folder = tmp_path_factory.mktemp("tables")
-    (folder / "rig.yaml").write_text(ONE_PLANE)
-    rig = load_rig(folder / "rig.yaml")
-    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.6, "bow": 0.004, "bow_phase": 0.0},
-                         effects=("stiffness", "viscous_damping", "unbalance", "shaft_bow"))
-    run = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=300.0, rpm_to=3000.0, rpm_per_s=230.0,
-                       noise=0.3, seed=1, sample_rate=3000.0)
+    rig, _, run = rig_records.one_plane_run(folder, {"bow": 0.004, "bow_phase": 0.0}, rpm_per_s=230.0,
+                                            sample_rate=3000.0)
     run.vectors(rig, (1,)).to_csv(folder / "pk.csv")
     _rewrite(folder / "pk.csv", folder / "pp.csv", 2.0)
     _rewrite(folder / "pk.csv", folder / "rms.csv", 1.0 / math.sqrt(2.0))
