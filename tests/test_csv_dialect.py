@@ -147,3 +147,39 @@ def test_times_written_with_too_few_decimals_are_the_grid_they_were_rounded_from
     path.write_text("t,kp,x,y\n" + "\n".join(rows[:5000] + rows[5001:]) + "\n")
     with pytest.raises(WaveformError, match="non-uniform sampling"):
         load_waveforms(path, rig)
+
+
+def test_columns_the_rig_does_not_name_may_hold_text(record, tmp_path):
+    """An acquisition's export carries a timestamp, a note, a channel the rig file does not name:
+    read as nothing (CSV, Parquet, the monitor's stream); a column the rig names must still hold
+    numbers."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from rotor_env.measurements.rig_stream import RigStream
+    from rotor_env.measurements.waveforms import WaveformError
+
+    folder, rig = record
+    head, data, _ = read_table(folder / "run.csv")
+    stamp = [f"2026-11-29 10:00:{i / 2500:09.6f}" for i in range(len(data))]
+    with open(tmp_path / "extra.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["timestamp", *head, "note", "temperature_C"])
+        for i, row in enumerate(data):
+            w.writerow([stamp[i], *(repr(float(v)) for v in row), "" if i % 50 else "marker", "25.5"])
+    cols = {h: data[:, j] for j, h in enumerate(head)}
+    pq.write_table(pa.table({"timestamp": stamp, **cols, "note": ["x"] * len(data)}), tmp_path / "extra.parquet")
+    plain = load_waveforms(folder / "run.csv", rig)
+    for path in (tmp_path / "extra.csv", tmp_path / "extra.parquet"):
+        rec = load_waveforms(path, rig)
+        np.testing.assert_array_equal(rec.u, plain.u)
+        np.testing.assert_array_equal(rec.phi, plain.phi)
+    streamed = sum(len(c) for c in RigStream(tmp_path / "extra.csv", rig, 1650.0, chunk_bytes=1 << 14))
+    assert streamed == sum(len(c) for c in RigStream(folder / "run.csv", rig, 1650.0, chunk_bytes=1 << 14)) > 0
+    text = (tmp_path / "extra.csv").read_text().splitlines()
+    row = text[10].split(",")
+    row[head.index("x") + 1] = "n/a"
+    text[10] = ",".join(row)
+    (tmp_path / "bad.csv").write_text("\n".join(text) + "\n")
+    with pytest.raises(WaveformError, match=r"bad\.csv, line 11, column 'x': 'n/a' is not a number"):
+        load_waveforms(tmp_path / "bad.csv", rig)

@@ -247,15 +247,23 @@ class StreamReader:
 
         first_line = self.line + 1
         n_lines = block.count(b"\n")
+        numeric = self._numeric(header)
         try:
             table = pacsv.read_csv(
                 pa.BufferReader(block),
                 read_options=pacsv.ReadOptions(column_names=header, use_threads=False),
                 parse_options=pacsv.ParseOptions(delimiter=self._dialect.delimiter, newlines_in_values=False),
-                convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(header, pa.float64()),
+                convert_options=pacsv.ConvertOptions(column_types={h: pa.float64() for h in header if h in numeric},
                                                      decimal_point=self._dialect.decimal),
             )
-            data = np.column_stack([table.column(i).to_numpy(zero_copy_only=False) for i in range(len(header))])
+            cols = []
+            for i, h in enumerate(header):
+                c = table.column(i)
+                if h in numeric or pa.types.is_floating(c.type) or pa.types.is_integer(c.type):
+                    cols.append(np.asarray(c.to_numpy(zero_copy_only=False), dtype=float))
+                else:  # a column the stream does not read (a timestamp, a note): nothing
+                    cols.append(np.full(len(c), np.nan))
+            data = np.column_stack(cols)
             if data.shape[0] == n_lines:
                 lines = np.arange(first_line, first_line + n_lines, dtype=np.int64)
             else:  # blank lines were skipped: number the rows from the text
@@ -266,7 +274,13 @@ class StreamReader:
         self.line += n_lines
         return np.asarray(data, dtype=float).reshape(-1, len(header)), lines
 
+    def _numeric(self, header: list[str]) -> set[str]:
+        """The columns that must hold numbers: the required ones and every model column (a
+        rate given is read); any other (a timestamp, a note) is read as nothing."""
+        return set(self.required) | (set(header) & set(COLUMNS))
+
     def _parse_slowly(self, block: bytes, header: list[str], first_line: int):
+        numeric = self._numeric(header)
         rows, lines = [], []
         text = block.decode("utf-8", errors="replace").split("\n")[:-1]
         for i, raw in enumerate(text):
@@ -291,6 +305,9 @@ class StreamReader:
                 try:
                     vals.append(self._dialect.number(cell))
                 except ValueError:
+                    if name not in numeric:
+                        vals.append(math.nan)
+                        continue
                     self._partial = (np.array(rows, dtype=float).reshape(-1, len(header)),
                                      np.array(lines, dtype=np.int64))
                     shown = cell.strip()

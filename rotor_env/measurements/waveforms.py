@@ -240,8 +240,11 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
     from .files import MeasurementError, check_finite, check_time, read_table, restore_rounded_time
 
     path = Path(path)
+    # only the rig's columns must be numbers: an acquisition's timestamp, a comment or a
+    # channel the rig file does not name is read as nothing
+    needed = [rig.time, *(p.name for p in rig.probes), rig.keyphasor or rig.speed]
     try:
-        header, data, lines = read_table(path)
+        header, data, lines = read_table(path, numeric=needed)
     except MeasurementError as exc:
         raise WaveformError(str(exc)) from None
     names = [h.strip() for h in header]
@@ -250,7 +253,6 @@ def load_waveforms(path: str | os.PathLike, rig: Rig) -> RigRecord:
         # one of two same-named columns would be read silently (the last: a crack's probe missed)
         raise WaveformError(f"{path}: column(s) {str(dup)[:200]} appear more than once in the header")
     col = {h: i for i, h in enumerate(names)}
-    needed = [rig.time, *(p.name for p in rig.probes), rig.keyphasor or rig.speed]
     missing = [c for c in needed if c not in col]
     if missing:
         raise WaveformError(f"{path}: column(s) {missing} named in the rig description ({rig.source}) are not in "
