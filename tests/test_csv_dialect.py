@@ -183,3 +183,12 @@ def test_columns_the_rig_does_not_name_may_hold_text(record, tmp_path):
     (tmp_path / "bad.csv").write_text("\n".join(text) + "\n")
     with pytest.raises(WaveformError, match=r"bad\.csv, line 11, column 'x': 'n/a' is not a number"):
         load_waveforms(tmp_path / "bad.csv", rig)
+    # the same for an order-tracked table
+    t_head, t_data, _ = read_table(folder / "table.csv")
+    with open(tmp_path / "table_extra.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["timestamp", *t_head, "note"])
+        w.writerows([["2026-11-29 10:00", *(repr(float(v)) for v in r), "ok"] for r in t_data])
+    angles = {"x": 45.0, "y": -45.0}
+    np.testing.assert_array_equal(load_vector_table(tmp_path / "table_extra.csv", angles=angles).vectors[1],
+                                  load_vector_table(folder / "table.csv", angles=angles).vectors[1])

@@ -54,6 +54,7 @@ __all__ = [
     "load_measurements",
     "read_table",
     "restore_rounded_time",
+    "table_header",
 ]
 
 REQUIRED: tuple[str, ...] = ("t", "phi", "theta_x", "theta_y")
@@ -327,6 +328,22 @@ def dialect_of_lines(lines: Sequence[str]) -> CsvDialect:
     comma = any(_DECIMAL_COMMA.fullmatch(c) for c in cells)
     point = any("." in c for c in cells)
     return CsvDialect(best, "," if best != "," and comma and not point else ".")
+
+
+def table_header(path: str | os.PathLike) -> list[str]:
+    """The column names of a CSV (in its dialect) or Parquet file, stripped; ``[]`` where the
+    file cannot be read (:func:`read_table` then names what is wrong)."""
+    path = Path(path)
+    try:
+        if path.suffix == ".parquet":
+            import pyarrow.parquet as pq
+
+            return [str(n).strip() for n in pq.read_schema(path).names]
+        with open(path, encoding="utf-8-sig", newline="") as fh:
+            first = fh.readline()
+        return [h.strip() for h in next(csv.reader([first], delimiter=csv_dialect(path).delimiter))]
+    except Exception:  # any unreadable file: the reader's own error follows
+        return []
 
 
 def read_table(path: str | os.PathLike, *, numeric: Sequence[str] | None = None

@@ -36,6 +36,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -469,7 +470,7 @@ def load_vector_table(
     are repeat acquisitions at a few speeds: neither a sweep nor at least 8 rows) and
     :attr:`VectorTable.runs` holds the labels.
     """
-    from .files import MeasurementError, read_table
+    from .files import MeasurementError, read_table, table_header
 
     path = Path(path)
     _check_convention(phase)
@@ -479,7 +480,8 @@ def load_vector_table(
     labels: dict[int, str] | None = None
     try:
         if run_column is None:
-            header, data, lines = read_table(path)
+            # only the table's own columns must be numbers (a timestamp or a note is read as nothing)
+            header, data, lines = read_table(path, numeric=[h for h in table_header(path) if _table_column(h)])
         else:
             names_in_file, labels = _text_column(path, run_column)
             header, data, lines = read_table(path, numeric=[h for h in names_in_file
@@ -646,6 +648,13 @@ def load_vector_table(
     return VectorTable(speed=speed, t=t, probes=names, vectors=vectors, amp_unit=amp_unit, angles=ang,
                        source=str(path), notes=tuple(notes), runs=runs,
                        lines=tuple(int(x) for x in lines))
+
+
+def _table_column(name: str) -> bool:
+    """A column the table reader reads: the speed, the time, an amplitude or a phase."""
+    low = name.strip().lower()
+    return (low in ("rpm", "speed_rpm", "speed", "t", "time", "time_s")
+            or re.search(r"(^|_)(amp|phase_deg)(_[123]x)?$", low) is not None)
 
 
 def _text_column(path: Path, name: str) -> tuple[list[str], dict[int, str]]:
