@@ -390,8 +390,10 @@ def _read_csv(path: Path, numeric: Sequence[str] | None = None) -> tuple[list[st
         raise MeasurementError(f"{path}: cannot read the file ({exc.strerror or exc})") from None
 
 
-def _read_csv_arrow(path: Path, numeric: Sequence[str] | None, dialect: CsvDialect):
-    """The fast path: ``None`` unless the file is clean (no blank line, null or odd cell)."""
+def _read_csv_arrow(path: Path, numeric: Sequence[str] | None, dialect: CsvDialect | None = None):
+    """The fast path: ``None`` unless the file is clean (no blank line, null or odd cell);
+    ``dialect``: the file's (read off it when not given)."""
+    dialect = csv_dialect(path) if dialect is None else dialect
     try:
         import pyarrow as pa
         import pyarrow.csv as pc
