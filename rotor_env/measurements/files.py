@@ -340,8 +340,9 @@ def table_header(path: str | os.PathLike) -> list[str]:
 
             return [str(n).strip() for n in pq.read_schema(path).names]
         with open(path, encoding="utf-8-sig", newline="") as fh:
-            first = fh.readline()
-        return [h.strip() for h in next(csv.reader([first], delimiter=csv_dialect(path).delimiter))]
+            lines = [fh.readline() for _ in range(DIALECT_LINES)]
+        dialect = dialect_of_lines(lines)
+        return [h.strip() for h in next(csv.reader([lines[0].rstrip("\r\n")], delimiter=dialect.delimiter))]
     except Exception:  # any unreadable file: the reader's own error follows
         return []
 

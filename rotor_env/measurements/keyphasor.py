@@ -154,17 +154,22 @@ def _times(ratio: float) -> str:
     return f"{ratio:.2f}x" if math.isfinite(ratio) else "out of all proportion to"
 
 
-def spurious_pulse(edges: np.ndarray, i: int) -> int | None:
-    """Of the two pulses that bound the irregular revolution ``i``, the one whose removal
-    leaves a revolution within :data:`SPURIOUS_RATIO` of its neighbours (the closer to them
-    where both do), neither the first nor the last; ``None`` where none does."""
+def spurious_pulse(edges: np.ndarray, candidates, *, regular: int | None = None) -> int | None:
+    """Of the pulses ``candidates`` (indices into ``edges``, neither the first nor the last),
+    the one whose removal leaves the revolution it merges within :data:`SPURIOUS_RATIO` of its
+    neighbours, the closest to them; with ``regular``, only where that revolution (before
+    the candidate) is then no longer irregular.  ``None`` where none does."""
     best, best_gap = None, math.inf
-    for c in (i + 1, i):
+    for c in candidates:
         if not 0 < c < len(edges) - 1:
             continue
-        ratio = period_ratio(np.delete(edges, c), c - 1)
-        if ratio is not None and SPURIOUS_RATIO[0] <= ratio <= SPURIOUS_RATIO[1] and abs(ratio - 1.0) < best_gap:
-            best, best_gap = c, abs(ratio - 1.0)
+        trial = np.delete(edges, c)
+        ratio = period_ratio(trial, c - 1)
+        if ratio is None or not SPURIOUS_RATIO[0] <= ratio <= SPURIOUS_RATIO[1] or abs(ratio - 1.0) >= best_gap:
+            continue
+        if regular is not None and _irregular(trial, regular):
+            continue
+        best, best_gap = c, abs(ratio - 1.0)
     return best
 
 
@@ -187,7 +192,7 @@ def drop_spurious_pulses(edges: np.ndarray) -> tuple[np.ndarray, list[int]]:
     i = 0
     while i < len(out) - 1 and len(dropped) < limit:
         if _irregular(out, i):
-            c = spurious_pulse(out, i)
+            c = spurious_pulse(out, (i + 1, i))  # the irregular revolution's two pulses
             if c is not None:
                 dropped.append(int(np.nonzero(keep)[0][c]))
                 keep[dropped[-1]] = False
@@ -558,22 +563,13 @@ class KeyphasorTracker:
         return out
 
     def _spurious_ahead(self, j: int) -> int | None:
-        """A spurious pulse among those ahead of revolution ``j`` of the window (none handed
-        out yet) whose removal leaves it regular and the revolution it merges within
-        :data:`SPURIOUS_RATIO` (the batch path's :func:`drop_spurious_pulses`, causal);
-        ``None`` where none is, or the record's share of dropped pulses is used up."""
+        """A spurious pulse (:func:`spurious_pulse`) among those ahead of revolution ``j`` of
+        the window that its check reads (none handed out yet), whose removal leaves that
+        revolution regular: the batch path's :func:`drop_spurious_pulses`, causal; ``None``
+        where none is, or the record's share of dropped pulses is used up."""
         if len(self.dropped) >= max(1, int(MAX_SPURIOUS_SHARE * self._n_edges)):
             return None
-        edges = self._edges
-        best, best_gap = None, math.inf
-        for c in range(j + 1, min(j + 1 + SPLINE_HALF_WINDOW + 1, len(edges) - 1)):
-            trial = np.delete(edges, c)
-            ratio = period_ratio(trial, c - 1)
-            if ratio is None or not SPURIOUS_RATIO[0] <= ratio <= SPURIOUS_RATIO[1] or _irregular(trial, j):
-                continue
-            if abs(ratio - 1.0) < best_gap:
-                best, best_gap = c, abs(ratio - 1.0)
-        return best
+        return spurious_pulse(self._edges, range(j + 1, j + 2 + SPLINE_HALF_WINDOW), regular=j)
 
     def _empty(self):
         p = self._held_p.shape[1] if self._held_p is not None else 0
@@ -609,7 +605,6 @@ def smooth_spin(t: np.ndarray, phi: np.ndarray, *, with_error: bool = False):
     coefficients to ``n`` points).  A simulated run through 725-5220 rpm with 1 % keyphasor
     ramps (``rig_simulation``): the per-revolution angle error 26 mrad raw, 2.2-3.9 mrad
     smoothed at 2.5 kHz; 7.7 and 0.47 mrad at 5 kHz; 0.7 and 0.07-0.12 mrad at 10 kHz."""
-    from scipy.interpolate import make_lsq_spline
 
     turns = np.arange(math.ceil(phi[0] / (2 * math.pi)), math.floor(phi[-1] / (2 * math.pi)) + 1)
     if len(turns) < 4 * SPIN_KNOT_REVOLUTIONS[0]:
@@ -622,17 +617,9 @@ def smooth_spin(t: np.ndarray, phi: np.ndarray, *, with_error: bool = False):
     for every in SPIN_KNOT_REVOLUTIONS:
         if len(turns) < 3 * every:
             break
-        inner = edges[every:-every:every]
-        knots = np.concatenate([[t[0]] * 4, inner, [t[-1]] * 4])
-        try:
-            spl = make_lsq_spline(x, y, knots, k=3)
-        except (ValueError, np.linalg.LinAlgError):
-            continue
-        rss = float(np.sum((spl(x) - y) ** 2))
-        bic = len(x) * math.log(max(rss / len(x), 1e-300)) + (len(inner) + 4) * math.log(len(x))
-        if bic < best_bic:
-            best, best_bic = spl, bic
-            best_err = math.sqrt(rss / len(x) * (len(inner) + 4) / len(x))
+        fit = _spin_spline(x, y, edges[every:-every:every])
+        if fit is not None and fit[1] < best_bic:
+            best, best_bic, best_err = fit
     if best is None:
         return (phi, np.gradient(phi, t), None) if with_error else (phi, np.gradient(phi, t))
     best, best_err = _refine_corners(best, best_bic, best_err, x, y, edges)
@@ -654,7 +641,6 @@ def _refine_corners(spl, bic: float, err: float, x: np.ndarray, y: np.ndarray, e
     whole run bends too slowly there (a hold at 3000 rpm after a 1000 rpm/s run-up: 14 mrad
     off at the corner, every pulse exact).  The knot intervals around such pulses (and their
     neighbours) are halved, round by round, while the BIC falls."""
-    from scipy.interpolate import make_lsq_spline
 
     n = len(x)
     for _ in range(CORNER_ROUNDS):
@@ -680,14 +666,23 @@ def _refine_corners(spl, bic: float, err: float, x: np.ndarray, y: np.ndarray, e
         mids = mids[count >= 4]
         if not len(mids):
             break
-        new = np.sort(np.concatenate([inner, mids]))
-        try:
-            cand = make_lsq_spline(x, y, np.concatenate([[x[0]] * 4, new, [x[-1]] * 4]), k=3)
-        except (ValueError, np.linalg.LinAlgError):
+        fit = _spin_spline(x, y, np.sort(np.concatenate([inner, mids])))
+        if fit is None or not fit[1] < bic:
             break
-        rss = float(np.sum((cand(x) - y) ** 2))
-        cand_bic = n * math.log(max(rss / n, 1e-300)) + (len(new) + 4) * math.log(n)
-        if not cand_bic < bic:
-            break
-        spl, bic, err = cand, cand_bic, math.sqrt(rss / n * (len(new) + 4) / n)
+        spl, bic, err = fit
     return spl, err
+
+
+def _spin_spline(x: np.ndarray, y: np.ndarray, inner: np.ndarray):
+    """The least-squares cubic spline through the pulses ``(x, y)`` with interior knots
+    ``inner`` (the record's ends pinned by ``x[0]``, ``x[-1]``), its BIC, and the RMS error of
+    its angle (:func:`smooth_spin`); ``None`` where it cannot be fitted."""
+    from scipy.interpolate import make_lsq_spline
+
+    n, p = len(x), len(inner) + 4
+    try:
+        spl = make_lsq_spline(x, y, np.concatenate([[x[0]] * 4, inner, [x[-1]] * 4]), k=3)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    rss = float(np.sum((spl(x) - y) ** 2))
+    return spl, n * math.log(max(rss / n, 1e-300)) + p * math.log(n), math.sqrt(rss / n * p / n)

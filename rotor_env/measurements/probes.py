@@ -25,7 +25,7 @@ import numpy as np
 
 from .rig import Rig
 
-__all__ = ["check_probe_signals", "plane_displacements", "probe_matrix", "to_model_axes"]
+__all__ = ["check_probe_signals", "plane_displacements", "probe_matrix", "quiet_probe", "to_model_axes"]
 
 #: samples at a channel's largest (or smallest) value, as a share of the record, beyond which
 #: its tops are flat (clipped) -- and at least this many, in runs of three or more
@@ -95,12 +95,25 @@ def check_probe_signals(where: str, rig: Rig, readings: dict[str, np.ndarray], p
         members = [p for p in rig.probes if p.plane == plane]
         if len(members) < 2:
             continue
-        one = {p.name: float(np.max(order_amplitudes(phi, readings[p.name], (1,))[:, 0], initial=0.0))
-               for p in members}
-        top = max(one.values())
-        for name, a in one.items():
-            if top > 0 and a < MIN_1X_SHARE * top:
-                other = max(one, key=one.get)
-                raise error(f"{where}, column {name!r}: its largest once-per-turn vibration is {a:.3g} {unit} against "
-                            f"{top:.3g} {unit} on {other!r} of the same plane: it reads noise alone (a broken cable, "
-                            "a probe not facing the shaft, the wrong column)")
+        quiet = quiet_probe({p.name: float(np.max(order_amplitudes(phi, readings[p.name], (1,))[:, 0], initial=0.0))
+                             for p in members}, unit)
+        if quiet:
+            raise error(f"{where}, column {quiet[0]!r}: its largest once-per-turn vibration is {quiet[1]}")
+
+
+def quiet_probe(largest_1x: dict[str, float], unit: str = "") -> tuple[str, str] | None:
+    """The probe of one plane whose largest 1X (``largest_1x``: probe -> amplitude) stays
+    under :data:`MIN_1X_SHARE` of its partner's, and the rest of the sentence that says so
+    (``"0.152 um against 98 um on 'x' of the same plane: it reads noise alone ..."``);
+    ``None`` where every probe holds the orbit's 1X.  The waveforms' rule and the tables'."""
+    if len(largest_1x) < 2:
+        return None
+    top_name = max(largest_1x, key=largest_1x.get)
+    top = largest_1x[top_name]
+    name = min(largest_1x, key=largest_1x.get)
+    a = largest_1x[name]
+    if not (top > 0 and a < MIN_1X_SHARE * top):
+        return None
+    u = f" {unit}" if unit else ""
+    return name, (f"{a:.3g}{u} against {top:.3g}{u} on {top_name!r} of the same plane: it reads noise alone "
+                  "(a broken cable, a probe not facing the shaft, the wrong column)")

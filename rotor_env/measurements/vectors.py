@@ -68,6 +68,9 @@ AMPLITUDE_UNITS: dict[str, float] = {"um": 1e-6, "µm": 1e-6, "mil": 25.4e-6, "m
 #: (the unbalance in g mm, the bow, the runout, the noise floor) while the criticals, the damping
 #: and a crack's relative stiffness, ratios of amplitudes, stay the same.
 AMPLITUDE_MEASURES: dict[str, float] = {"pk": 1.0, "pp": 0.5, "rms": math.sqrt(2.0)}
+#: a table's speed column (the first of these names found, any case) and its time column
+SPEED_COLUMNS = ("rpm", "speed_rpm", "speed")
+TIME_COLUMNS = ("t", "time", "time_s")
 #: speed unit -> rad/s
 SPEED_UNITS: dict[str, float] = {"rpm": 2.0 * math.pi / 60.0, "rad/s": 1.0, "hz": 2.0 * math.pi}
 
@@ -498,7 +501,7 @@ def load_vector_table(
     dup = sorted({h for h in lower if lower.count(h) > 1})
     if dup:  # the last of two 'x_amp' columns would silently win
         raise VectorTableError(f"{path}: column(s) {_cut(dup)} appear more than once")
-    speed_col = next((c for c in ("rpm", "speed_rpm", "speed") if c in lower), None)
+    speed_col = next((c for c in SPEED_COLUMNS if c in lower), None)
     if speed_col is None:
         raise VectorTableError(f"{path}: no speed column: expected 'rpm' (found columns {_cut(header)})")
     unit = "rpm" if speed_col != "speed" else speed_unit
@@ -522,7 +525,7 @@ def load_vector_table(
     if data.shape[0] < 8 and labels is None:
         raise VectorTableError(f"{path}: only {data.shape[0]} rows; an order-tracked run needs at least 8 speeds")
     used = [col[speed_col]] + [i for v in probes.values() for pair in v.values() for i in pair]
-    t_idx = col.get("t", col.get("time", col.get("time_s")))
+    t_idx = next((col[c] for c in TIME_COLUMNS if c in col), None)
     if t_idx is not None:
         used.append(t_idx)
     for j in used:
@@ -626,16 +629,12 @@ def load_vector_table(
         ang = np.radians([angles[p] for p in names])
         # the probes of one plane see one orbit: one whose 1X stays far under the others' reads
         # noise alone (the waveforms' check, measurements.probes)
-        from .probes import MIN_1X_SHARE
+        from .probes import quiet_probe
 
-        top = np.nanmax(np.abs(vectors[1]), axis=0)
-        if len(names) > 1 and np.nanmax(top) > 0:
-            j = int(np.argmin(top))
-            if top[j] < MIN_1X_SHARE * np.nanmax(top):
-                raise VectorTableError(f"{path}, column {names[j] + '_amp'!r}: its largest 1X amplitude is "
-                                       f"{top[j] / to_peak:.3g} against {np.nanmax(top) / to_peak:.3g} on "
-                                       f"{names[int(np.argmax(top))]!r} of the same plane: it reads noise alone "
-                                       "(a broken cable, a probe not facing the shaft, the wrong column)")
+        top = np.nanmax(np.abs(vectors[1]), axis=0) / to_peak  # in the file's measure
+        quiet = quiet_probe(dict(zip(names, top.tolist(), strict=True)))
+        if quiet:
+            raise VectorTableError(f"{path}, column {quiet[0] + '_amp'!r}: its largest 1X amplitude is {quiet[1]}")
     runs = None
     if labels is not None:
         runs = []
@@ -653,7 +652,7 @@ def load_vector_table(
 def _table_column(name: str) -> bool:
     """A column the table reader reads: the speed, the time, an amplitude or a phase."""
     low = name.strip().lower()
-    return (low in ("rpm", "speed_rpm", "speed", "t", "time", "time_s")
+    return (low in SPEED_COLUMNS or low in TIME_COLUMNS
             or re.search(r"(^|_)(amp|phase_deg)(_[123]x)?$", low) is not None)
 
 
