@@ -15,6 +15,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from rotor_env.diagnosis.second_mode import SecondMode, shoot_second_mode, substeps
+from rotor_env.measurements.rig import SPEED_UNITS
+
+SPEED_UNITS_RPM = SPEED_UNITS["rpm"]
 
 
 def _run_up(n: int = 801, dt: float = 0.05, w0: float = 0.6, w1: float = 2.4):
@@ -195,6 +198,7 @@ def test_a_missing_crack_is_not_taken_for_a_second_mode(tmp_path):
     (1.1, 0.02, "split of one mode"),      # 1.1x the model's own: an asymmetry's two criticals
     (0.85, 0.02, "split of one mode"),
     (2.0, 1e-5, "rings undamped"),
+    (2.5, 1e-5, ""),                       # above the run (top 1.8): its damping is not read
     (2.0, 0.26, "filter of the noise"),    # a 1/f record read as white fitted one so
     (0.3, 0.05, "below the run"),          # the run from 0.4: a mode's 1X there is a constant
     (2.0, 0.02, ""),                       # a second mode
@@ -211,3 +215,47 @@ def test_what_is_not_a_second_mode(frequency, zeta, reason):
                           grid=SimpleNamespace(phid=np.linspace(0.4, 1.8, 50)))
     why = _not_a_second_mode(fit)
     assert (reason in why) if reason else why == "", why
+
+
+# ------------------------------------------------------------------ a mode above the run
+@pytest.fixture(scope="module")
+def mode_above(tmp_path_factory):
+    """The foreign simulator's two-disk rotor, seed 26: a run-up to 2550 rpm, the second mode at
+    3348 rpm (31 % above the top speed, 2.37 times the first); 0.5 um white noise, 2.5 kHz."""
+    return _foreign("two_modes", 26, tmp_path_factory.mktemp("mode_above"))
+
+
+def test_a_mode_above_the_run_is_not_read_as_a_bow(mode_above):
+    """Below the critical a bow's 1X grows as W^2 from its slow-roll vector, as a higher mode's
+    quasi-static response does.  The 1X vectors of a rotor whose second mode lies above the run
+    named runout and a shaft bow before (1.27x their floor; the mode 0.85x, refused as outside
+    the run): now the mode above the run is kept, no bow and no runout, and the record's one
+    conclusion names no fault."""
+    from rotor_env.diagnosis.from_rig import diagnose_rig
+    from rotor_env.diagnosis.from_vectors import BOW, diagnose_vectors
+    from rotor_env.diagnosis.synchronous import RUNOUT, SECOND_MODE
+
+    record, truth = mode_above
+    vd = diagnose_vectors(record.vectors((1,)), ip=record.rig.ip)
+    assert vd.missing == [SECOND_MODE], vd.missing
+    (w2, _), = vd.after.extra_modes
+    top = float(record.vectors((1,)).speed.max())
+    assert w2 > 1.2 * top
+    assert w2 / SPEED_UNITS_RPM == pytest.approx(truth["second_critical_rpm"], rel=0.1)
+    assert vd.after.rms < 1.5 * vd.noise_floor
+    assert BOW not in vd.missing and RUNOUT not in vd.missing
+    rd = diagnose_rig(record)
+    assert BOW not in rd.missing and rd.verdict.startswith("explained"), (rd.verdict, rd.missing)
+
+
+def test_a_bow_is_still_named_beside_a_mode_above_the_run(tmp_path):
+    """The control: the foreign simulator's bowed one-disk rotor (seed 26, 9 um bow): past the
+    critical a bow's 1X falls as 1/W^2 and a mode above the run's keeps growing, so the mode's
+    fit is far from the bow's and the bow is named by the vectors and by the record (20 kHz, as drawn)."""
+    from rotor_env.diagnosis.from_rig import diagnose_rig
+    from rotor_env.diagnosis.from_vectors import BOW, diagnose_vectors
+
+    record, truth = _foreign("shaft_bow", 26, tmp_path, fs=20000.0)
+    vd = diagnose_vectors(record.vectors((1,)), ip=record.rig.ip)
+    assert BOW in vd.missing and BOW not in vd.undecidable, (vd.missing, vd.undecidable)
+    assert BOW in diagnose_rig(record).missing

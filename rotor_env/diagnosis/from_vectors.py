@@ -38,7 +38,7 @@ from ..results import Result, jsonable
 from .synchronous import RUNOUT, SECOND_MODE, SynchronousModel, VectorFit, fit_vectors
 from .verdict import FLOOR_RATIO, verdict_of
 
-__all__ = ["VECTOR_CANDIDATES", "VECTOR_MODEL", "VectorDiagnosis", "check_whirl_direction", "diagnose_vectors",
+__all__ = ["ABOVE_RUN", "VECTOR_CANDIDATES", "VECTOR_MODEL", "VectorDiagnosis", "check_whirl_direction", "diagnose_vectors",
            "vector_noise_floor"]
 
 VECTOR_MODEL: tuple[str, ...] = ("viscous_damping", "unbalance")
@@ -65,7 +65,10 @@ SCREEN_ITERATIONS = 25
 #: and be significant at this level (HAC Wald test), and stricter than alpha when alpha is loose
 LOG10_P_MAX = -3.0
 #: the effect one run's 1X vectors cannot tell from probe runout (:func:`_bow_or_runout`)
+#: nor, below the critical, from a mode above the run (:func:`_bow_or_mode_above`)
 BOW = "shaft_bow"
+#: an added mode this far above the top speed is outside the run: only its quasi-static 1X shows
+ABOVE_RUN = 1.2
 
 
 def vector_noise_floor(table: VectorTable, bands: int = 8, residual: np.ndarray | None = None) -> float:
@@ -177,14 +180,17 @@ def _wald(fit: VectorFit, effect: str) -> tuple[float, float]:
     return wald_test(fit.params[idx], cov[np.ix_(idx, idx)])
 
 
-def _plausible(fit: VectorFit, effect: str, before: VectorFit | None = None) -> tuple[bool, str]:
-    """Whether ``fit`` (``before`` with ``effect`` added) is physically plausible."""
+def _plausible(fit: VectorFit, effect: str, before: VectorFit | None = None, *,
+               above_run: bool = False) -> tuple[bool, str]:
+    """Whether ``fit`` (``before`` with ``effect`` added) is physically plausible.
+
+    ``above_run``: a second mode above the run is plausible too (:func:`_bow_or_mode_above`)."""
     if effect == RUNOUT:
         return True, ""
     if effect == SECOND_MODE:
         (w2, c2), = fit.extra_modes[-1:]
         lo, hi = float(fit.table.speed.min()), float(fit.table.speed.max())
-        if not 0.5 * lo <= w2 <= 1.2 * hi:
+        if not 0.5 * lo <= w2 <= (math.inf if above_run else ABOVE_RUN * hi):
             return False, f"its natural frequency {w2 / SPEED_UNITS['rpm']:.0f} rpm lies outside the run"
         if abs(w2 / fit.w_ref - 1.0) < 0.05:
             return False, "it sits on the first mode (a split or a skewed peak, not another mode)"
@@ -521,6 +527,7 @@ def diagnose_vectors(
         best = None
         round_fits: dict[str, VectorFit] = {}
         accepted: dict[str, VectorFit] = {}
+        mode_above: VectorFit | None = None
         for cand in remaining:
             trial = current.model.with_effect(cand)
             if cand != RUNOUT and cand != SECOND_MODE and trial.kinds.get(cand) == "rotating" \
@@ -567,6 +574,9 @@ def diagnose_vectors(
                 rejected.append({"effect": cand, "rule": f"{why} after {SCREEN_ITERATIONS} iterations (not converged)"})
                 continue
             ok, why = _plausible(fit, cand, current)
+            if (cand == SECOND_MODE and not ok and log10_p <= log10_alpha
+                    and _plausible(fit, cand, current, above_run=True)[0]):
+                mode_above = fit  # what a bow is weighed against (:func:`_bow_or_mode_above`)
             entry = {"effect": cand, "F": F, "log10_p": log10_p, "rms": fit.rms, "gain": gain,
                      "plausible": ok}
             tested.append(entry)
@@ -592,9 +602,20 @@ def diagnose_vectors(
             break
         best = _simplest_within_noise(best, accepted, floor)
         best, why = _bow_or_runout(best, round_fits, floor, table.amp_unit)
+        if best[0] in (BOW, RUNOUT) and mode_above is not None:
+            named = best[0]
+            best, said = _bow_or_mode_above(best, mode_above, floor)
+            if said:
+                notes.append(said)
+                if named == BOW:
+                    why = said
+                    remaining = [c for c in remaining if c != BOW]
+                else:
+                    why = ""  # the bow-or-runout sentence was about a runout no longer read
         if why:
             undecidable[BOW] = why
-            notes.append(why)
+            if why not in notes:
+                notes.append(why)
         missing.append(best[0])
         current = best[1]
         remaining = [c for c in remaining if c != best[0]]
@@ -679,6 +700,49 @@ def _simplest_within_noise(best: tuple[str, VectorFit], accepted: dict[str, Vect
         if gap <= chi2.ppf(0.99, extra) and (simpler is None or len(fit.param_names) < len(simpler[1].param_names)):
             simpler = (cand, fit)
     return simpler or best
+
+
+def _bow_or_mode_above(best: tuple[str, VectorFit], mode: VectorFit,
+                       floor: float) -> tuple[tuple[str, VectorFit], str]:
+    """A shaft bow (or probe runout), or another mode of the rotor above the run, as one run's
+    1X vectors tell them.
+
+    Below its critical a bow ``b`` responds as ``b / (1 - W^2 + i c W) = b (1 + W^2 + ...)``:
+    a 1X that grows as ``W^2`` from the slow-roll vector.  A mode above the run (natural
+    frequency ``w2`` beyond the top speed, which every shaft has: a finite-element code's
+    rotor run below its second critical) adds its quasi-static response ``u2 W^2 / (w2^2 -
+    W^2)``, which grows the same way; past the first critical the bow's response falls as
+    ``1/W^2`` and the mode's keeps growing, so a run far above the critical can tell them.
+    Where the bow's fit does not beat the mode's by more than the 99 % point of a chi-square
+    with the bow's two parameters (in the noise's variance per real component), the run
+    cannot decide: the mode is kept (it is there on every rotor; a bow is a fault, named
+    only on evidence), and the bow is said undecidable.  A foreign two-disk rotor whose second
+    mode lay 31 % above its top speed was read as a bow before (1.27x the floor; the mode
+    0.85x)."""
+    from scipy.stats import chi2
+
+    if not floor > 0:
+        return best, ""
+    rss_bow, rss_mode = (float(np.nansum(np.abs(f.residual) ** 2)) for f in (best[1], mode))
+    gap = 2.0 * (rss_mode - rss_bow) / floor ** 2
+    if gap > chi2.ppf(0.99, 2):
+        return best, ""
+    (w2, _), = mode.extra_modes[-1:]
+    top = float(mode.table.speed.max())
+    if best[0] == RUNOUT:
+        # a runout is the reading's own term and no fault: the better fit is kept, said in a note
+        return (SECOND_MODE, mode), (
+            f"{RUNOUT}: another mode of the rotor above the run (natural frequency {w2 / SPEED_UNITS['rpm']:.0f} rpm, "
+            f"{w2 / top:.2f}x the top speed) fits these 1X vectors as well or better (the runout's fit "
+            + (f"{gap:.2g} noise variances worse" if gap > 0 else f"{-gap:.2g} noise variances better")
+            + "): the mode's quasi-static response is read, not a runout") if gap <= 0 else (best, "")
+    return (SECOND_MODE, mode), (
+        f"{BOW}: these 1X vectors cannot tell it from another mode of the rotor above the run (natural frequency "
+        f"{w2 / SPEED_UNITS['rpm']:.0f} rpm, {w2 / top:.2f}x the top speed; the bow's fit "
+        + (f"{gap:.2g} noise variances worse" if gap > 0 else f"{-gap:.2g} noise variances better")
+        + "): below the critical a bow's 1X grows as W^2 from its slow-roll vector, as a higher mode's quasi-static "
+        "response does; the mode, which every shaft has, is kept; a run well past the critical (where a bow's 1X "
+        "falls and the mode's grows) or slow-roll vectors before and after would decide")
 
 
 def _bow_or_runout(best: tuple[str, VectorFit], fits: dict[str, VectorFit], floor: float,
