@@ -99,6 +99,8 @@ SCREEN_ITERATIONS = 2
 SCREEN_KEEP = 3
 #: Levenberg-Marquardt steps of a kept candidate's fit to convergence
 CONVERGE_ITERATIONS = 40
+#: a fit that gave up after this share of its steps crawled along a valley (_crack_laws_from_lead)
+CRAWL_SHARE = 0.75
 #: the screening reads every other shooting segment when the record has at least this many
 #: (the ranking needs each candidate's fall, not its last digit; the candidates kept are
 #: fitted to convergence on every segment, and every decision is made on those fits)
@@ -460,11 +462,15 @@ def _crack_laws_from_lead(grid, screen_grid, screen_x0, model, lib, fits, keep, 
         return {}
     lead = min(leads, key=lambda c: fits[c].rss)
     lead_fit = fits[lead]
-    if lead_fit.gave_up:
-        # the best crack could not come within a tie of the round's best candidate, which is
-        # not a crack: its load and axis are where a crack's fit stalls on a record another
-        # effect explains (a misalignment's record spent 4.7 of its 18.8 s on the other laws
-        # started from them, both given up)
+    if lead_fit.gave_up and lead_fit.iterations >= CRAWL_SHARE * CONVERGE_ITERATIONS:
+        # the best crack crawled along a valley for most of its steps and still could not come
+        # within a tie of the round's best candidate, which is not a crack: a crack times an
+        # ever larger side load tending to a 2X forcing (a misalignment's record: the load to
+        # 11x the orbit's peak, the size to 0.002, 38 of 40 steps).  Its load and axis are no
+        # start: the other laws from them crawl too (4.7 of that record's 18.8 s, both given
+        # up).  A lead that gave up early stalled away from the truth instead, and the other
+        # laws from its load may still win (a foreign breathing crack's lead gave up after 10
+        # steps against a misalignment; the breathing law from its load beat it 3x)
         return {}
     if not lead_fit.wald(SIDE_LOAD)[2] < math.log10(0.05):
         # no side load to read: the lead's start gives the other laws nothing their own lack

@@ -45,13 +45,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-__all__ = ["SPIN_KNOT_REVOLUTIONS", "KeyphasorError", "KeyphasorTracker", "check_once_per_turn", "check_periods",
-           "drop_spurious_pulses", "order_amplitudes", "pulse_edges", "smooth_spin", "spin_from_pulses",
-           "spurious_note", "spurious_pulse"]
+__all__ = ["SPIN_KNOT_REVOLUTIONS", "KeyphasorError", "KeyphasorTracker", "SpinFit", "check_once_per_turn",
+           "check_periods", "drop_spurious_pulses", "order_amplitudes", "pulse_edges", "smooth_spin", "spin_fit",
+           "spin_from_pulses", "spurious_note", "spurious_pulse"]
 
 MIN_PULSES = 5
 #: a revolution this much longer (shorter) than its neighbours is a missed (extra) pulse
@@ -606,9 +607,55 @@ def smooth_spin(t: np.ndarray, phi: np.ndarray, *, with_error: bool = False):
     ramps (``rig_simulation``): the per-revolution angle error 26 mrad raw, 2.2-3.9 mrad
     smoothed at 2.5 kHz; 7.7 and 0.47 mrad at 5 kHz; 0.7 and 0.07-0.12 mrad at 10 kHz."""
 
+    fit = spin_fit(t, phi)
+    if fit is None:
+        return (phi, np.gradient(phi, t), None) if with_error else (phi, np.gradient(phi, t))
+    return (fit.spline(t), fit.spline(t, 1), fit.error_rad) if with_error else (fit.spline(t), fit.spline(t, 1))
+
+
+@dataclass(frozen=True)
+class SpinFit:
+    """The spin's least-squares spline through the pulses (:func:`smooth_spin`) and what its
+    angle's error is: the pulses' angle jitter about it, and the spline space the error of a
+    least-squares fit lies in."""
+
+    spline: object            #: scipy BSpline of the angle (rad) against time (s)
+    pulse_times: np.ndarray   #: s, the points fitted (the record's two ends first and last)
+    jitter_rad: float         #: the pulses' RMS angle misfit about the spline
+    #: each point's angle jitter (rad): the misfit's local RMS (a pulse timed to a fraction of a
+    #: sample jitters in time, and so in angle by the speed times that: more at speed)
+    pulse_jitter: np.ndarray
+
+    @property
+    def error_rad(self) -> float:
+        """RMS error of the smoothed angle: the jitter times ``sqrt(p / n)`` (the mean
+        prediction variance of a least-squares fit with ``p`` coefficients to ``n`` points)."""
+        n, p = len(self.pulse_times), len(self.spline.c)
+        return self.jitter_rad * math.sqrt(p / n)
+
+    def error_basis(self, t: np.ndarray) -> np.ndarray:
+        """``(len(t), p)`` matrix ``L`` such that the smoothed angle's errors at the times ``t``
+        are ``L z`` with ``z`` standard normal: independent pulse jitter ``s_k`` through the
+        least-squares fit, covariance ``L L' = B(t) M M' B(t)'`` with ``M = (B'B)^-1 B' diag(s)``,
+        ``B`` the spline basis at the pulses.  Errors at neighbouring times are nearly the
+        same: one smooth curve over a knot interval, not independent noise."""
+        from scipy.interpolate import BSpline
+
+        knots, k = self.spline.t, self.spline.k
+        x = self.pulse_times
+        B = BSpline.design_matrix(x, knots, k).toarray()
+        M = np.linalg.lstsq(B, np.diag(self.pulse_jitter), rcond=None)[0]
+        w, V = np.linalg.eigh(M @ M.T)
+        root = V * np.sqrt(np.clip(w, 0.0, None))
+        Bt = BSpline.design_matrix(np.clip(np.asarray(t, dtype=float), x[0], x[-1]), knots, k).toarray()
+        return Bt @ root
+
+
+def spin_fit(t: np.ndarray, phi: np.ndarray) -> SpinFit | None:
+    """The spin's spline (:func:`smooth_spin`): ``None`` where the record is too short to smooth."""
     turns = np.arange(math.ceil(phi[0] / (2 * math.pi)), math.floor(phi[-1] / (2 * math.pi)) + 1)
     if len(turns) < 4 * SPIN_KNOT_REVOLUTIONS[0]:
-        return (phi, np.gradient(phi, t), None) if with_error else (phi, np.gradient(phi, t))
+        return None
     edges = np.interp(2 * math.pi * turns, phi, t)
     # the record's ends pin the spline beyond the first and last pulse (the angle there)
     x = np.concatenate([[t[0]], edges, [t[-1]]])
@@ -621,9 +668,17 @@ def smooth_spin(t: np.ndarray, phi: np.ndarray, *, with_error: bool = False):
         if fit is not None and fit[1] < best_bic:
             best, best_bic, best_err = fit
     if best is None:
-        return (phi, np.gradient(phi, t), None) if with_error else (phi, np.gradient(phi, t))
-    best, best_err = _refine_corners(best, best_bic, best_err, x, y, edges)
-    return (best(t), best(t, 1), best_err) if with_error else (best(t), best(t, 1))
+        return None
+    best, _ = _refine_corners(best, best_bic, best_err, x, y, edges)
+    e2 = (best(x) - y) ** 2
+    # the jitter's local variance: the squared misfit's mean over the neighbouring pulses
+    w = np.ones(min(JITTER_WINDOW, len(x)))
+    local = np.convolve(e2, w, mode="same") / np.convolve(np.ones_like(e2), w, mode="same")
+    return SpinFit(best, x, math.sqrt(float(np.mean(e2))), np.sqrt(local))
+
+
+#: pulses over which the jitter's local RMS is read (:class:`SpinFit`)
+JITTER_WINDOW = 33
 
 
 #: a pulse the spin's spline misses by more than this many times the pulses' jitter (their

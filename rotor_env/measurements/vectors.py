@@ -420,6 +420,9 @@ class VectorTable:
     lines: tuple[int, ...] | None = None
     #: the keyphasor angle's error (pulse timing jitter, rad) of vectors tracked from waveforms
     phase_error_rad: float = 0.0
+    #: ``(rows, p)``: the keyphasor angle's error at the rows is ``phase_error_basis @ z``, ``z``
+    #: standard normal (:meth:`~.keyphasor.SpinFit.error_basis`: one smooth curve, not white)
+    phase_error_basis: np.ndarray | None = None
 
     @property
     def rpm(self) -> np.ndarray:

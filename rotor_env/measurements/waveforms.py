@@ -31,7 +31,7 @@ from .keyphasor import (
     KeyphasorError,
     check_once_per_turn,
     pulse_edges,
-    smooth_spin,
+    spin_fit,
     spin_from_pulses,
 )
 from .probes import check_probe_signals, to_model_axes
@@ -85,11 +85,13 @@ class RigRecord:
         # is already fine, and four times its length would not fit)
         per_turn = 2 * math.pi / max(float(np.max(np.diff(self.phi))), 1e-12)
         up = int(np.clip(math.ceil(64.0 / per_turn), 1, 4))
-        phi, error = self.tracking_spin()
+        spin = spin_fit(self.t, self.phi)
+        phi = self.phi if spin is None else spin.spline(self.t)
         tr = order_track(self.t, X, phi, orders, revolutions, upsample=up)
         return VectorTable(speed=tr.speed, t=tr.t, probes=names, vectors=tr.vectors, amp_unit=unit,
                            angles=angles, source=self.source, notes=self.notes,
-                           phase_error_rad=keyphasor_phase_error(self.t, self.phi) if error is None else error)
+                           phase_error_rad=keyphasor_phase_error(self.t, self.phi) if spin is None else spin.error_rad,
+                           phase_error_basis=None if spin is None else spin.error_basis(tr.t))
 
     def compensate_runout(self, runout: dict[str, complex] | None = None, below_rpm: float | None = None) -> RigRecord:
         """Subtract the probes' runout: a 1X vector per probe (``lead``), or the slow-roll
@@ -134,8 +136,8 @@ class RigRecord:
         keyphasor edge sharper than a sample puts tens of milliradians into each pulse's angle
         at a few kHz, which every vector carries times its amplitude (2.6 um on a 100 um peak at
         2.5 kHz); smoothed, a tenth of that."""
-        phi, _, error = smooth_spin(self.t, self.phi, with_error=True)
-        return phi, error
+        spin = spin_fit(self.t, self.phi)
+        return (self.phi, None) if spin is None else (spin.spline(self.t), spin.error_rad)
 
     def minus_1x(self, t: np.ndarray, vectors: dict[str, np.ndarray], note: str) -> RigRecord:
         """The record without a 1X response that changes along it: ``vectors`` per channel of
