@@ -91,3 +91,63 @@ def test_a_table_whose_probe_reads_noise_alone_is_refused(record, rig_records, t
     with pytest.raises(VectorTableError, match=r"dead\.csv, column 'y_amp': its largest 1X amplitude is .* it reads "
                                                r"noise alone"):
         load_vector_table(tmp_path / "dead.csv", angles=angles)
+
+
+# ------------------------------------------------------------------ the monitor's stream
+def _stream(path, rig, chunk_bytes=8192):
+    from rotor_env.measurements.rig_stream import RigStream
+
+    stream = RigStream(path, rig, 1650.0, chunk_bytes=chunk_bytes)
+    rows = sum(len(out) for out in stream)
+    return stream, rows
+
+
+def test_the_stream_refuses_a_flat_channel_at_once(record, rig_records):
+    """``RigStream`` (the monitor): the dead probe refused after ten revolutions, not at the
+    end of the stream -- the batch reader's sentence, and the line the stream stopped at."""
+    from rotor_env.measurements.files import MeasurementError
+    from rotor_env.measurements.probes import FLAT_REVOLUTIONS
+
+    folder, rig, cols = record
+    path = rig_records.write_csv(folder / "dead_stream.csv", {**cols, "y": np.zeros_like(cols["y"])})
+    with pytest.raises(MeasurementError, match=r"dead_stream\.csv, column 'y': the reading is 0 um on every row of "
+                                               r"the first [0-9]+ revolutions: a disconnected probe") as exc:
+        _stream(path, rig)
+    turns = int(str(exc.value).split("the first ")[1].split(" ")[0])
+    assert FLAT_REVOLUTIONS <= turns < 3 * FLAT_REVOLUTIONS
+
+
+@pytest.mark.parametrize("chunk_bytes", [2048, 65536])
+def test_the_stream_says_what_the_record_says(record, rig_records, chunk_bytes):
+    """The clipped orbit and the probe reading noise alone: refused by the stream at its end with
+    the batch reader's sentences (the same line for the clip), in small or large chunks; the
+    clean record streams through."""
+    from rotor_env.measurements.files import MeasurementError
+
+    folder, rig, cols = record
+    _, rows = _stream(rig_records.write_csv(folder / "clean_stream.csv", cols), rig, chunk_bytes)
+    assert rows > 100
+    peak = np.abs(cols["x"] - cols["x"].mean()).max()
+    clipped = {**cols, "x": np.minimum(cols["x"], cols["x"].mean() + 0.6 * peak)}
+    path = rig_records.write_csv(folder / "clip_stream.csv", clipped)
+    with pytest.raises(WaveformError) as batch:
+        load_waveforms(path, rig)
+    with pytest.raises(MeasurementError) as streamed:
+        _stream(path, rig, chunk_bytes)
+    assert str(streamed.value) == str(batch.value)
+    noise = {**cols, "y": np.random.default_rng(0).normal(0.0, 0.3, cols["y"].size)}
+    path = rig_records.write_csv(folder / "noise_stream.csv", noise)
+    with pytest.raises(MeasurementError, match=r"noise_stream\.csv, column 'y': its largest once-per-turn vibration "
+                                               r"is [0-9.]+ um against [0-9.]+ um on 'x' of the same plane"):
+        _stream(path, rig, chunk_bytes)
+
+
+def test_the_stream_passes_quantised_volts(record, rig_records, tmp_path):
+    """A 12-bit converter's steps, probes in volts on a -10 V gap: the stream reads them too."""
+    _, _, cols = record
+    (tmp_path / "rig.yaml").write_text(VOLTS)
+    rig = load_rig(tmp_path / "rig.yaml")
+    step = 20.0 / 2**12
+    volts = {k: np.round((-10.0 + 7.87e-3 * cols[k]) / step) * step for k in ("x", "y")}
+    _, rows = _stream(rig_records.write_csv(tmp_path / "volts_stream.csv", {**cols, **volts}), rig)
+    assert rows > 100

@@ -55,7 +55,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from .core import COLUMNS
 from .files import MeasurementError, check_finite, check_time, first_step
 from .keyphasor import KeyphasorError, KeyphasorTracker, check_once_per_turn, spurious_note
-from .probes import probe_matrix
+from .probes import ProbeSignalWatch, probe_matrix
 from .rig import SPEED_UNITS, TIME_UNITS, Rig
 from .stream import CHUNK_BYTES, SlidingDerivatives, StreamReader
 from .waveforms import LENGTH_UNIT, MAX_PROBE_M, TARGET_DT
@@ -338,6 +338,9 @@ class RigStream:
         else:
             self._spin = _SpeedColumn()
         self._origin = _Origin(rig, self.name)
+        #: the batch reader's probe checks, causal (a flat channel at once; clipping and a
+        #: probe reading noise alone when the stream ends)
+        self._watch = ProbeSignalWatch(self.name, rig, error=MeasurementError)
         self._scale = LENGTH_UNIT if rig.model == "translation" else 1.0
         self._dt = 0.0  # s
         self._last_t = math.nan
@@ -414,6 +417,7 @@ class RigStream:
     def _push(self, data: np.ndarray, lines: np.ndarray) -> np.ndarray:
         t = data[:, self._cols[0]] * TIME_UNITS[self.rig.time_unit]
         self._last_t = float(t[-1])
+        self._watch.readings(data[:, self._cols[2:]], lines)
         x = np.column_stack([self.rig.to_metres(data[:, c]) for c in self._cols[2:]])
         spin = data[:, self._cols[1]]
         if self.rig.keyphasor is None:
@@ -432,6 +436,13 @@ class RigStream:
         t, phi, speed, accel, x, lines = released
         if not len(t):
             x = np.zeros((0, len(self.rig.probes)))
+        try:
+            self._watch.revolutions(phi, x)
+            if final:
+                self._watch.finish()
+        except MeasurementError as exc:
+            line = getattr(exc, "line", None) or (int(lines[-1]) if len(lines) else self.line)
+            raise self._fail(line, str(exc)) from None
         if not len(t) and not final:
             return np.zeros((0, len(COLUMNS)))
         if len(t) and self._dec is None:
