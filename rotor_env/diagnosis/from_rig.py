@@ -97,7 +97,7 @@ from .second_mode import SecondMode
 from .synchronous import RUNOUT, SECOND_MODE, extra_mode_vectors
 from .synchronous.fit import VectorFit, fit_vectors
 
-__all__ = ["RigDiagnosis", "diagnose_rig", "exchanged_modes", "one_mode_band"]
+__all__ = ["RigDiagnosis", "closest_reading", "diagnose_rig", "exchanged_modes", "one_mode_band"]
 
 #: the waveforms are fitted on the first mode's band only where it holds this many revolutions
 MIN_BAND_REVOLUTIONS = 50
