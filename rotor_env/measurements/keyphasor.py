@@ -644,8 +644,11 @@ class SpinFit:
         knots, k = self.spline.t, self.spline.k
         x = self.pulse_times
         B = BSpline.design_matrix(x, knots, k).toarray()
-        M = np.linalg.lstsq(B, np.diag(self.pulse_jitter), rcond=None)[0]
-        w, V = np.linalg.eigh(M @ M.T)
+        # M M' = (B'B)^-1 B' diag(s^2) B (B'B)^-1: p x p, never n x n (a long record has tens
+        # of thousands of pulses)
+        C = np.linalg.pinv(B.T @ B)
+        Bs = B * self.pulse_jitter[:, None]
+        w, V = np.linalg.eigh(C @ (Bs.T @ Bs) @ C)
         root = V * np.sqrt(np.clip(w, 0.0, None))
         Bt = BSpline.design_matrix(np.clip(np.asarray(t, dtype=float), x[0], x[-1]), knots, k).toarray()
         return Bt @ root
