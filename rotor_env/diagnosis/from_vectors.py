@@ -528,6 +528,7 @@ def diagnose_vectors(
         round_fits: dict[str, VectorFit] = {}
         accepted: dict[str, VectorFit] = {}
         mode_above: VectorFit | None = None
+        best_misfit = math.inf
         for cand in remaining:
             trial = current.model.with_effect(cand)
             if cand != RUNOUT and cand != SECOND_MODE and trial.kinds.get(cand) == "rotating" \
@@ -597,8 +598,9 @@ def diagnose_vectors(
                 continue
             accepted[cand] = fit
             # ranked by the misfit with the keyphasor angle's smooth error as what it is (_misfit)
-            if best is None or _misfit(fit, floor, probe_floor) < _misfit(best[1], floor, probe_floor):
-                best = (cand, fit)
+            misfit = _misfit(fit, floor, probe_floor)
+            if best is None or misfit < best_misfit:
+                best, best_misfit = (cand, fit), misfit
         if best is None:
             break
         best = _simplest_within_noise(best, accepted, floor, probe_floor)
@@ -691,13 +693,13 @@ def _simplest_within_noise(best: tuple[str, VectorFit], accepted: dict[str, Vect
 
     if not floor > 0:
         return best
-    misfit_best = _misfit(best[1], floor, probe_floor or floor)
+    misfit_best = _misfit(best[1], floor, probe_floor)
     simpler = None
     for cand, fit in accepted.items():
         extra = len(best[1].param_names) - len(fit.param_names)
         if cand == best[0] or extra <= 0:
             continue
-        gap = _misfit(fit, floor, probe_floor or floor) - misfit_best
+        gap = _misfit(fit, floor, probe_floor) - misfit_best
         if gap <= chi2.ppf(0.99, extra) and (simpler is None or len(fit.param_names) < len(simpler[1].param_names)):
             simpler = (cand, fit)
     return simpler or best
@@ -724,7 +726,7 @@ def _bow_or_mode_above(best: tuple[str, VectorFit], mode: VectorFit, floor: floa
 
     if not floor > 0:
         return best, ""
-    gap = _misfit(mode, floor, probe_floor or floor) - _misfit(best[1], floor, probe_floor or floor)
+    gap = _misfit(mode, floor, probe_floor) - _misfit(best[1], floor, probe_floor)
     if gap > chi2.ppf(0.99, 2):
         return best, ""
     (w2, _), = mode.extra_modes[-1:]
@@ -745,7 +747,7 @@ def _bow_or_mode_above(best: tuple[str, VectorFit], mode: VectorFit, floor: floa
         "falls and the mode's grows) or slow-roll vectors before and after would decide")
 
 
-def _misfit(fit: VectorFit, floor: float, probe_floor: float) -> float:
+def _misfit(fit: VectorFit, floor: float, probe_floor: float | None = None) -> float:
     """The fit's residual energy in noise variances (per real component): ``2 rss / floor^2``
     where the vectors' noise is white.  Where the keyphasor angle's error is known as a smooth
     curve (``table.phase_error_basis``: the spin spline's error, :class:`~.keyphasor.SpinFit`),
@@ -757,7 +759,7 @@ def _misfit(fit: VectorFit, floor: float, probe_floor: float) -> float:
     bow's angle from a 20 kHz keyphasor, the bow)."""
     r = fit.residual
     basis = fit.table.phase_error_basis
-    if basis is None or not probe_floor > 0 or basis.shape[0] != r.shape[0]:
+    if basis is None or probe_floor is None or not probe_floor > 0 or basis.shape[0] != r.shape[0]:
         return 2.0 * float(np.nansum(np.abs(r) ** 2)) / floor ** 2
     n_p = len(fit.table.probes)
     order = np.repeat(np.asarray(fit.orders, dtype=float), n_p)
@@ -790,7 +792,7 @@ def _bow_or_runout(best: tuple[str, VectorFit], fits: dict[str, VectorFit], floo
     other = {BOW: RUNOUT, RUNOUT: BOW}.get(best[0])
     if other is None or other not in fits or not floor > 0:
         return best, ""
-    misfit = {k: _misfit(f, floor, probe_floor or floor) for k, f in ((best[0], best[1]), (other, fits[other]))}
+    misfit = {k: _misfit(f, floor, probe_floor) for k, f in ((best[0], best[1]), (other, fits[other]))}
     gap = abs(misfit[other] - misfit[best[0]])
     if gap > chi2.ppf(0.99, 2):
         return best, ""
