@@ -442,6 +442,33 @@ def test_probe_angles_swapped_are_a_clear_error(rig):
     assert "backward" in str(err.value) and "probes" in str(err.value)
 
 
+def test_probe_track_runout_is_no_backward_whirl(rig):
+    """Each probe's track runout is a 1X vector of its own (no whirl): on a healthy rotor with
+    a small unbalance it dominates most speeds' raw 1X and may read as a backward whirl.  The
+    direction is judged less the slow-roll vector: the record is diagnosed (its runout named),
+    while the same table with mirrored angles is still refused."""
+    from rotor_env.diagnosis.from_vectors import BACKWARD_SHARE, check_whirl_direction
+    from rotor_env.diagnosis.synchronous import vector_probe_matrix
+
+    table = _table(rig, _params(tau=0.0015), rpm_per_s=300.0)
+    # the two tracks' runouts (8 um each) happen to form a backward circle in the probes' angles
+    runout = vector_probe_matrix(table) @ np.array([8.0, 8.0j])
+    Y = table.vectors[1] + runout[None, :]
+    worn = VectorTable(table.speed, table.t, table.probes, {1: Y}, table.amp_unit, angles=table.angles,
+                       source="runout.csv")
+    # the raw 1X (what the check read before) turns backward at most speeds
+    Q = np.linalg.lstsq(vector_probe_matrix(worn), Y.T, rcond=None)[0]
+    fwd, bwd = np.abs(Q[0] + 1j * Q[1]), np.abs(np.conj(Q[0]) + 1j * np.conj(Q[1]))
+    assert np.mean(bwd > fwd) > BACKWARD_SHARE
+    check_whirl_direction(worn, 0.3)  # no error
+    out = diagnose_vectors(worn).to_dict()
+    assert "runout" in out["missing"]
+    mirrored = VectorTable(worn.speed, worn.t, worn.probes, worn.vectors, worn.amp_unit, angles=-worn.angles,
+                           source="mirrored.csv")
+    with pytest.raises(VectorTableError, match="backward"):
+        check_whirl_direction(mirrored, 0.3)
+
+
 def test_a_table_without_time_is_fitted_quasi_steady(rig):
     table = _table(rig, _params(), rpm_per_s=15.0, rpm=(900.0, 2400.0), sample_rate=1500.0)
     # a slow sweep exported without its time column
