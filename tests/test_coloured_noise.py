@@ -304,3 +304,79 @@ def test_a_model_that_misses_the_record_far_does_not_read_its_misfit_as_noise(tm
     assert (floor, uncertainty, counted) == (white, oe.FLOOR_UNCERTAINTY, False)
     note = oe._misfit_between_orders_note(noise, base, white)
     assert "not counted" in note and f"{base.rms / (white * math.sqrt(noise.variance_factor)):.3g}x" in note
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.6, 0.9, -0.5])
+def test_colour_inflation_is_the_estimates_variance_under_the_noise(rho):
+    """``colour_inflation(J (J'J)^-1 e_i, ...)``: the variance of a least-squares estimate
+    under AR(1) noise over its variance under white noise of the same marginal variance.
+    References: the time-domain quadratic form ``w' R w / w'w`` with the Toeplitz
+    autocorrelation ``rho^|i - j|`` (numpy), and the estimates' variance over 4000 simulated
+    noise draws (within 8 %: a variance from 4000 draws scatters by 2 %)."""
+    from scipy.linalg import toeplitz
+    from scipy.signal import lfilter
+
+    from rotor_env.diagnosis.output_error import colour_inflation
+
+    n, dt = 1500, 1.0
+    t = np.arange(n) * dt
+    # a 2X-like chirp, its quadrature, and an offset: the estimate of the first
+    ph = 2 * math.pi * (0.005 * t + 0.1 * t * t / (2 * n))
+    J = np.column_stack([np.cos(ph), np.sin(ph), np.ones(n)])
+    a = np.linalg.inv(J.T @ J)[:, 0]
+    w = J @ a
+
+    def ar1(nu):
+        return 2 * dt * (1 - rho * rho) / np.abs(1 - rho * np.exp(-2j * math.pi * nu * dt)) ** 2
+
+    kappa = colour_inflation(w, dt, ar1, lambda nu: np.full(np.shape(nu), 2 * dt))
+    R = toeplitz(rho ** np.arange(n))
+    assert kappa == pytest.approx(float(w @ R @ w / (w @ w)), rel=0.01)
+    rng = np.random.default_rng(3)
+    e = lfilter([math.sqrt(1 - rho * rho)], [1.0, -rho], rng.normal(size=(4000, 2 * n)), axis=1)[:, n:]
+    est = e @ w  # the estimate's noise part, draw by draw
+    assert float(np.var(est)) / float(w @ w) == pytest.approx(kappa, rel=0.08)
+    if rho == 0.0:
+        assert kappa == pytest.approx(1.0, abs=1e-12)
+
+
+def _with_ar1_noise(run, std: float, rho: float, seed: int):
+    """``run`` with AR(1) noise (lag-one correlation ``rho`` at the sample rate, marginal
+    ``std``) added to each probe: an integrating sensor, a filtered channel."""
+    from scipy.signal import lfilter
+
+    rng = np.random.default_rng(seed)
+    cols = dict(run.columns)
+    for name in ("x", "y"):
+        e = rng.normal(0.0, std * math.sqrt(1 - rho * rho), len(cols[name]) + 2000)
+        cols[name] = cols[name] + lfilter([1.0], [1.0, -rho], e)[2000:]
+    return type(run)(cols, run.natural_rpm, run.params)
+
+
+def test_an_open_crack_under_ar1_probe_noise_is_named_with_its_size_and_axis(one_plane, tmp_path, monkeypatch):
+    """An open crack (D 0.0315, stiff axis 53.7 deg) at 2.5 kHz under 0.35 um white and
+    0.35 um AR(1) noise (rho 0.9): the crack's amplitude rule counts the halves' likelihood
+    ratio in variances of the crack's own estimate (``estimate_inflation``, several times the
+    white one here), so the crack is named, its size within 5 % and its axis within 5 deg.
+    The control: counted in white noise variances (the rule as it was), the crack is turned
+    down as a rub's contact and nothing is named."""
+    from rotor_env.diagnosis import oe_diagnosis
+    from rotor_env.params import RotorParams
+    from rotor_env.rig_simulation import simulate_rig
+
+    rng = np.random.default_rng(2)
+    D, axis = float(rng.uniform(0.025, 0.05)), float(rng.uniform(0, 180))
+    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.4, "D": D, "D_axis": math.radians(axis)},
+                         effects=("stiffness", "viscous_damping", "unbalance", "asymmetry"))
+    run = simulate_rig(one_plane, params, natural_rpm=1650.0, rpm_from=300.0, rpm_to=3000.0, rpm_per_s=300.0,
+                       sample_rate=2500.0, noise=0.35, seed=2)
+    run = _with_ar1_noise(run, 0.35, 0.9, seed=12)
+    d = _diagnose(one_plane, run, tmp_path, candidates=("asymmetry", "rub"))
+    assert d["missing"] == ["asymmetry"], (d["missing"], d["rejected"])
+    got = d["parameters"]["asymmetry"]["values"]
+    assert got["D"] == pytest.approx(D, rel=0.05)
+    assert abs((math.degrees(got["D_axis"]) - axis + 90.0) % 180.0 - 90.0) < 5.0
+    monkeypatch.setattr(oe_diagnosis, "estimate_inflation", lambda *a, **k: 1.0)
+    white = _diagnose(one_plane, run, tmp_path, candidates=("asymmetry", "rub"))
+    assert "asymmetry" not in white["missing"]
+    assert "crack_amplitude_independence" in white["rejected"]["asymmetry"]

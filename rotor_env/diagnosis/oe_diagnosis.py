@@ -58,6 +58,7 @@ from .output_error import (
     arguments_of,
     canonical_scale,
     equation_error_start,
+    estimate_inflation,
     fit_output_error,
     library_effects,
     start_from,
@@ -777,7 +778,7 @@ def _with_side_load(model: tuple[str, ...], effect: str, lib: Sequence[str]) -> 
     return model
 
 
-def _crack_split(grid: ShootingGrid, fit: OutputErrorFit, effect: str) -> str:
+def _crack_split(grid: ShootingGrid, fit: OutputErrorFit, effect: str, noise: OffOrderNoise | None = None) -> str:
     """The crack's asymmetry on the low- and the high-amplitude half of the segments.
 
     Each half is fitted twice: with the crack free, and with it held at the whole record's
@@ -815,7 +816,14 @@ def _crack_split(grid: ShootingGrid, fit: OutputErrorFit, effect: str) -> str:
                                         held=tuple(e for e in fit.effects if e in (SIDE_LOAD, effect)))
         except (FloatingPointError, np.linalg.LinAlgError, ValueError):
             return ""
-        cost += max(at_whole.rss - f.rss, 0.0) / floor2
+        # counted in noise variances of the crack's own estimate: under coloured noise (an
+        # integrating sensor, a filtered channel) the residual energy one parameter moves is
+        # kappa times a chi-square (estimate_inflation, with the in-band reading ``noise``
+        # where the floor counts it; 1 for white noise).  A foreign open crack under AR(1)
+        # noise (rho 0.9 at 2.5 kHz, the band 5-18x the level above the response) cost 64
+        # white variances and was turned down as a rub
+        kappa = estimate_inflation(f, coef_name, None if noise is None else noise.level_at)
+        cost += max(at_whole.rss - f.rss, 0.0) / (floor2 * kappa)
         i = f.names.index(coef_name)
         # in the units of each half's own fitted shaft (k = 1): the halves' time units differ
         scale = float(canonical_scale(effect, f.value(f"{TIME_UNIT_EFFECT}.k"))[0])
@@ -876,7 +884,7 @@ def diagnose_output_error(
     # an effect removes against the residual above the floor (read again from the final model)
     white = floor
     in_band = in_band_noise(base)
-    floor, unc, _ = _floor_with_band(base, white, in_band)
+    floor, unc, band_counted = _floor_with_band(base, white, in_band)
     say(f"starting model fitted: residual {base.rms / floor:.3g}x the noise floor")
     current, cur_model, added = base, tuple(model), []
     tried: list[Candidate] = []
@@ -1019,7 +1027,7 @@ def diagnose_output_error(
                 key = (rnd, r.effect)
                 msg = crack_amp_cache.get(key)
                 if msg is None:
-                    msg = _crack_split(grid, fits[r.effect], r.effect)
+                    msg = _crack_split(grid, fits[r.effect], r.effect, in_band if band_counted else None)
                     crack_amp_cache[key] = msg
                 if msg:
                     r.accepted, r.reason = False, msg

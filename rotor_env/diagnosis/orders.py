@@ -171,6 +171,15 @@ class OffOrderNoise:
         return [(int(b), int(read[read < b][-1]), int(read[read > b][0]))
                 for b in np.flatnonzero(~self.read) if read.size and read[0] < b < read[-1]]
 
+    def level_at(self, nu: np.ndarray) -> np.ndarray:
+        """:attr:`level` at the frequencies ``nu`` (cycles per unit of time): each band's,
+        the model's (1) where no band covers them -- as :attr:`variance_factor` counts it."""
+        nu = np.asarray(nu, dtype=float)
+        out = np.ones_like(nu)
+        for (lo, hi), lv in zip(self.bands, self.level, strict=True):
+            out[(nu >= lo) & (nu < hi)] = lv
+        return out
+
     @property
     def variance_factor(self) -> float:
         """The noise's variance over the model's (at least one): each band at :attr:`level`,

@@ -77,7 +77,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cache, cached_property, lru_cache
 from pathlib import Path
 
@@ -104,7 +104,9 @@ __all__ = [
     "arguments_of",
     "canonical_scale",
     "coefficient_slice",
+    "colour_inflation",
     "equation_error_start",
+    "estimate_inflation",
     "fit_output_error",
     "library_effects",
     "noise_ar1_high_band",
@@ -173,7 +175,8 @@ def library_effects() -> tuple[str, ...]:
 # ------------------------------------------------------------------ the compiled kernel
 _KERNEL_TEMPLATE = '''
 @njit(cache=True)
-def rhs(ph, pd, pdd, x, S, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, fx, fS):
+def rhs(ph, pd, pdd, x, S, theta, arg, active, actx, acta, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
+        fx, fS):
     # the moment of every coefficient of the model (midx); sensitivities of the free ones (pidx)
     columns(ph, pd, pdd, x[0], x[1], x[2], x[3], ip, arg, active, cy, cx)
     ay = -ip * pd * x[2]
@@ -191,12 +194,17 @@ def rhs(ph, pd, pdd, x, S, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, c
         fS[1, c] = S[3, c]
         fS[2, c] = 0.0
         fS[3, c] = 0.0
+    # the state's differences evaluate only the effects that read the state (actx): the
+    # others' columns are the same at the shifted state, copied (the same numbers, less work)
+    for j in range(cy.shape[0]):
+        cy2[j] = cy[j]
+        cx2[j] = cx[j]
     for m in range(4):
         for q in range(4):
             xp[q] = x[q]
         h = FD_STATE * (1.0 + abs(x[m]))
         xp[m] += h
-        columns(ph, pd, pdd, xp[0], xp[1], xp[2], xp[3], ip, arg, active, cy2, cx2)
+        columns(ph, pd, pdd, xp[0], xp[1], xp[2], xp[3], ip, arg, actx, cy2, cx2)
         ay2 = -ip * pd * xp[2]
         ax2 = ip * pd * xp[3]
         for j in midx:
@@ -216,7 +224,11 @@ def rhs(ph, pd, pdd, x, S, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, c
         for q in range(arg.shape[0]):
             argp[q] = arg[q]
         argp[qidx[i]] += FD_ARG
-        columns(ph, pd, pdd, x[0], x[1], x[2], x[3], ip, argp, active, cy2, cx2)
+        # an argument's difference reads its own effect's columns only (acta: that effect)
+        owner = ARG_OWNER[qidx[i]]
+        acta[owner] = True
+        columns(ph, pd, pdd, x[0], x[1], x[2], x[3], ip, argp, acta, cy2, cx2)
+        acta[owner] = False
         gy = 0.0
         gx = 0.0
         for j in range(qlo[i], qhi[i]):
@@ -251,6 +263,10 @@ def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, midx, q
     cx2 = np.zeros(ncol)
     xp = np.zeros(4)
     argp = arg.copy()
+    actx = np.zeros(active.shape[0], np.bool_)
+    for e in range(active.shape[0]):
+        actx[e] = active[e] and STATE_DEP[e]
+    acta = np.zeros(active.shape[0], np.bool_)
     # the sensitivities carried: the parameters' (coefficients, then arguments) and the start
     # state's; jac's output-term columns between them stay zero (no state depends on them),
     # and leaving them out of the integration saves almost half its work
@@ -292,7 +308,8 @@ def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, midx, q
             dt = dts / nsub
             for m in range(nsub):
                 p0, w0 = spin_between(phi[k], phid[k], a, m * dt)
-                rhs(p0, w0, a, x, S, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp, k1, K1)
+                rhs(p0, w0, a, x, S, theta, arg, active, actx, acta, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp,
+                    argp, k1, K1)
                 hh = 0.5 * dt
                 for q in range(4):
                     xs[q] = x[q] + hh * k1[q]
@@ -300,23 +317,23 @@ def shoot_range(s0, s1, t, phi, phid, seg, x0, theta, arg, active, pidx, midx, q
                     for c in range(ns):
                         Ss[q, c] = S[q, c] + hh * K1[q, c]
                 pm, wm = spin_between(p0, w0, a, hh)
-                rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
-                    k2, K2)
+                rhs(pm, wm, a, xs, Ss, theta, arg, active, actx, acta, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp,
+                    argp, k2, K2)
                 for q in range(4):
                     xs[q] = x[q] + hh * k2[q]
                 for q in range(4):
                     for c in range(ns):
                         Ss[q, c] = S[q, c] + hh * K2[q, c]
-                rhs(pm, wm, a, xs, Ss, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
-                    k3, K3)
+                rhs(pm, wm, a, xs, Ss, theta, arg, active, actx, acta, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp,
+                    argp, k3, K3)
                 for q in range(4):
                     xs[q] = x[q] + dt * k3[q]
                 for q in range(4):
                     for c in range(ns):
                         Ss[q, c] = S[q, c] + dt * K3[q, c]
                 pe, we = spin_between(p0, w0, a, dt)
-                rhs(pe, we, a, xs, Ss, theta, arg, active, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp, argp,
-                    k4, K4)
+                rhs(pe, we, a, xs, Ss, theta, arg, active, actx, acta, pidx, midx, qidx, qlo, qhi, ip, cy, cx, cy2, cx2, xp,
+                    argp, k4, K4)
                 for q in range(4):
                     x[q] += dt / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
                 for q in range(4):
@@ -350,6 +367,23 @@ class _Kernel:
 _KERNELS: dict[tuple[str, ...], _Kernel] = {}
 
 
+def _reads_state(columns) -> bool:
+    """Whether an effect's column function reads the state (``th_x, th_y, w_x, w_y``, its
+    arguments 4-7) anywhere in its code: one that never loads them (an unbalance, a load, a
+    bow) has the same columns at every state, and the kernel's state differences skip it."""
+    import dis
+
+    code = columns.__code__
+    state = set(code.co_varnames[3:7])
+    for ins in dis.get_instructions(columns):
+        if ins.opname.startswith("LOAD") or ins.opname.startswith("STORE") or ins.opname.startswith("DELETE"):
+            val = ins.argval if isinstance(ins.argval, tuple) else (ins.argval,)
+            if state & set(val):
+                return True
+    # a closure or a nested function over the state: read as reading it
+    return bool(state & set(code.co_cellvars))
+
+
 def _kernel(effects: tuple[str, ...]) -> _Kernel:
     """The compiled shooting kernel for these effects (all of them can be switched on or off
     per call: one compilation, cached on disk, serves every candidate model)."""
@@ -364,6 +398,7 @@ def _kernel(effects: tuple[str, ...]) -> _Kernel:
     body = ["@njit(cache=True)",
             "def columns(phi, phid, phidd, thx, thy, wx, wy, ip, arg, active, cy, cx):"]
     coef_slots, arg_slots = {}, {}
+    state_dep, arg_owner = [], []
     j = a = 0
     for i, name in enumerate(effects):
         eff: Effect = EFFECTS[name]
@@ -379,8 +414,12 @@ def _kernel(effects: tuple[str, ...]) -> _Kernel:
             body.append(f"        cx[{j + q}] = rx[{q}]")
         coef_slots[name] = (j, j + nc)
         arg_slots[name] = (a, a + na)
+        state_dep.append(_reads_state(eff.columns))
+        arg_owner += [i] * na
         j += nc
         a += na
+    head += [f"STATE_DEP = np.array({state_dep!r}, dtype=np.bool_)",
+             f"ARG_OWNER = np.array({(arg_owner or [0])!r}, dtype=np.int64)", ""]
     text = ("# generated by rotor_env.diagnosis.output_error; safe to delete\n" + "\n".join(head) + "\n\n"
             + "\n".join(body) + "\n\n" + _KERNEL_TEMPLATE)
     module = load_generated("rotor_id_oe", text, (Path(__file__), Path(effects_module.__file__),
@@ -974,6 +1013,47 @@ def _project(grid, r, jac, npq):
             both -= _baseline_fit(grid, both)
             rt[ch::2], Jt[ch::2] = both[:, 0], both[:, 1:]
     return rt, Jt
+
+
+def colour_inflation(w: np.ndarray, dt: float, density, reference) -> float:
+    """How much more a weighted sum ``sum_t w_t' e_t`` of the noise varies under the density
+    ``density(nu)`` than under ``reference(nu)`` (one-sided densities of stationary noise,
+    the channels of ``w`` ``(N, channels)`` independent and alike): ``int |W|^2 density /
+    int |W|^2 reference``, ``W`` the rows' transform (zero-padded to twice their length:
+    ``int |W(nu)|^2 S(nu) d nu`` is the sum's variance).  With ``w = J (J'J)^-1 e_i`` it is how
+    much wider the least-squares estimate of parameter ``i`` is under ``density`` than the
+    reference model -- and so by how much a change of the residual energy counted in the
+    reference's noise variances overstates the evidence (a likelihood ratio ``dRSS /
+    sigma^2`` is that factor times a chi-square)."""
+    w = np.asarray(w, dtype=float)
+    if w.ndim == 1:
+        w = w[:, None]
+    n = w.shape[0]
+    size = 1 << int(math.ceil(math.log2(2 * max(n, 1))))
+    power = np.sum(np.abs(np.fft.rfft(w, size, axis=0)) ** 2, axis=1)
+    nu = np.fft.rfftfreq(size, dt)
+    ref = float(np.sum(power * reference(nu)))
+    return float(np.sum(power * density(nu))) / ref if ref > 0 else 1.0
+
+
+def estimate_inflation(fit: OutputErrorFit, name: str, band_ratio=None) -> float:
+    """:func:`colour_inflation` of the free parameter ``name`` of ``fit``: the noise its grid
+    models (:meth:`ShootingGrid.noise_density`: AR(1) at the input rate through the
+    decimating filter), times ``band_ratio(nu)`` (what the residual read between the shaft's
+    orders says of the noise in the rotor's band against that model; 1 where ``None``),
+    against the white noise of the same level through the same filter.  1 for white noise
+    read at its level.  The Jacobian is the fit's own (every free parameter and each
+    segment's start state partialled out, as the estimate has them)."""
+    grid = fit.grid
+    if grid.noise_rho == 0.0 and band_ratio is None:
+        return 1.0
+    _, _, J3, names = sample_scores(fit, with_jacobian=True)
+    J = J3.reshape(-1, J3.shape[2])
+    a = np.linalg.pinv(J.T @ J)[:, list(names).index(name)]
+    white = replace(grid, noise_rho=0.0)
+    coloured = grid.noise_density if band_ratio is None else (lambda nu: grid.noise_density(nu) * band_ratio(nu))
+    # the rows are the segments' samples in time order: one series per channel
+    return colour_inflation(J3 @ a, float(np.median(np.diff(grid.t))), coloured, white.noise_density)
 
 
 def _noise_correlation_time(taps: np.ndarray | None, q: int, rho: float) -> float:
