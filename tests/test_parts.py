@@ -69,3 +69,33 @@ def test_moved_means_the_intervals_do_not_overlap_and_angles_wrap():
         side.params["unbalance"]["ci95"]["tau"] = 2e-4
     assert parts.moved() == {} and not parts.changed
     assert parts.sentence().startswith("no change of the rotor")
+
+
+def _with_stiffness(params: dict, k: float, half: float = 0.01) -> dict:
+    return {**params, "stiffness": {"values": {"k": k}, "ci95": {"k": half}}}
+
+
+def test_sides_whose_shafts_differ_beyond_any_fault_hold_two_modes_not_a_change():
+    """A two-disk rotor's record, its second mode just above the run: before the break the
+    one-mode model's stiffness 1.68 (a mode between the two), after it 1.04 with a crack and a
+    bow "appeared" -- both sides explained, yet no fault moves the shaft's stiffness by 60 %:
+    no change of the rotor, and the sentence says the model lacks a mode.  A crack's own 8 %
+    (sqrt: 4 % in the natural frequency) is a change."""
+    from rotor_env.diagnosis.parts import MAX_STIFFNESS_CHANGE
+
+    before = Side("explained", [], BASE, _with_stiffness(_unbalance(0.0004, 7e-5), 1.68, 0.05))
+    after = Side("explained_after_adding", ["hinge_crack", "shaft_bow"], (*BASE, "hinge_crack", "shaft_bow"),
+                 _with_stiffness(_unbalance(0.015, 1e-4), 1.04))
+    parts = RecordParts(100.0, before, after)
+    assert parts.explained and parts.appeared == ["hinge_crack", "shaft_bow"]
+    assert parts.other_mode == (1.68, 1.04) and not parts.changed
+    assert "another mode of the rotor" in parts.sentence()
+    # a crack that opened: the stiffness 8 % lower after, within what a fault does
+    cracked = Side("explained_after_adding", ["asymmetry"], (*BASE, "asymmetry"),
+                   _with_stiffness(_unbalance(0.0004, 7e-5), 1.68 * 0.92, 0.05))
+    opened = RecordParts(100.0, before, cracked)
+    assert opened.other_mode is None and opened.changed
+    # the bound, either way
+    for factor, two_modes in ((1.01, True), (0.99, False)):
+        cracked.params["stiffness"]["values"]["k"] = 1.68 * (1 + MAX_STIFFNESS_CHANGE * factor)
+        assert (RecordParts(100.0, before, cracked).other_mode is not None) == two_modes
