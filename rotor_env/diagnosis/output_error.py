@@ -1043,7 +1043,10 @@ def estimate_inflation(fit: OutputErrorFit, name: str, band_ratio=None) -> float
     orders says of the noise in the rotor's band against that model; 1 where ``None``),
     against the white noise of the same level through the same filter.  1 for white noise
     read at its level.  The Jacobian is the fit's own (every free parameter and each
-    segment's start state partialled out, as the estimate has them)."""
+    segment's start state partialled out, as the estimate has them).  A fit on part of the
+    segments (one half of the record) joins segments that are not neighbours in time: the
+    noise's correlation across such a join (a few grid samples, against a segment's hundreds)
+    is read as if they were."""
     grid = fit.grid
     if grid.noise_rho == 0.0 and band_ratio is None:
         return 1.0
