@@ -266,3 +266,31 @@ def test_a_candidate_that_pushes_the_models_own_parameter_out_of_range_is_not_ph
                                parameters=lambda e: {"stiffness": {"k": 1.0}, "viscous_damping": {"c": -0.01},
                                                      "unbalance": {"tau": 0.004, "beta": 2.76}}[e])
     assert _physical_problem(fit(-0.0074, 0.02), "cross_coupled_stiffness", base_bad) == ""
+
+
+def test_a_score_test_round_fits_the_rub_only_when_a_crack_reaches_its_rule(monkeypatch):
+    """In a round the score tests chose, the rub is tried only against a crack (the
+    crack_not_rub rule): a weak open crack (D = 0.002, the starting model at 0.98x the floor,
+    its score test at log10 p = -7) is named, D within its interval of the truth, with the
+    rub fitted beside it and reported as tried against the crack.  Where the crack is turned
+    down before that rule (here: a relevance share no effect can meet), the rub is never
+    fitted -- a misalignment record's such round spent 1.4 s of 15 on it."""
+    from rotor_env.diagnosis import oe_diagnosis
+
+    cands = ("asymmetry", "rub", "shaft_bow", "static_load")
+    g = _grid(_record(("asymmetry",), {"D": 0.002, "D_axis": 0.5}), 1)
+    diag = oe_diagnosis.diagnose_output_error(g, MODEL, cands)
+    assert diag.added == ["asymmetry"] and diag.rms_ratio_before <= oe_diagnosis.SEARCH_RATIO
+    got = diag.parameters()["asymmetry"]
+    assert abs(got["values"]["D"] - 0.002) <= got["ci95"]["D"]
+    rub = [c for c in diag.candidates if c.effect == "rub"]
+    assert len(rub) == 1 and "only against the crack" in rub[0].reason and not rub[0].accepted
+    calls = []
+    real = oe_diagnosis._rub_against
+    monkeypatch.setattr(oe_diagnosis, "_rub_against", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(oe_diagnosis, "RELEVANT_SHARE", 2.0)
+    turned_down = oe_diagnosis.diagnose_output_error(g, MODEL, cands)
+    assert any("leans towards asymmetry" in n for n in turned_down.notes)  # the round was tried
+    assert any(c.effect == "asymmetry" and "not relevant" in c.reason for c in turned_down.candidates)
+    assert turned_down.added == [] and calls == []
+    assert not any(c.effect == "rub" for c in turned_down.candidates)
