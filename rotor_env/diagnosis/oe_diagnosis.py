@@ -456,7 +456,7 @@ def _rub_against(grid, screen_grid, screen_x0, model, lib, current, converged, f
     if screened is None:
         return None
     done = [f.rss for f in converged if not f.gave_up]
-    level = (min(done) * 1.001 + 2.0 * _tie_level(len(screened.values)) * floor * floor) if done else None
+    level = _give_up_level(min(done) if done else None, len(screened.values), floor)
     return _converge(grid, _with_side_load(model, "rub", lib), "rub", screened, current.x0, level)
 
 
@@ -472,7 +472,7 @@ def _crack_lookalikes(grid, model, lib, fits, keep, screened_rss, lead: str, cur
     removed 7 % of the excess and was named, the bow after it.  Fitted on, the bow alone
     reaches 0.99x."""
     lead_fit = fits[lead]
-    level = lead_fit.rss * 1.001 + 2.0 * _tie_level(len(lead_fit.values)) * floor * floor
+    level = _give_up_level(lead_fit.rss, len(lead_fit.values), floor)
     out = {}
     for c in list(fits):
         if c in keep or c in CRACKS or c == "rub" or c not in screened_rss:
@@ -541,8 +541,7 @@ def _crack_laws_from_lead(grid, screen_grid, screen_x0, model, lib, fits, keep, 
             continue
         # like the round's candidates: a law that cannot come near the best fit of the round
         # gives up (its fit then judged at its optimum only where a decision reads it)
-        level = (None if best_rss is None else best_rss * 1.001
-                 + 2.0 * _tie_level(len(best.values)) * floor * floor)
+        level = _give_up_level(best_rss, len(best.values), floor)
         full = _converge(grid, m, c, best, current.x0, level)
         # a candidate screened out holds a fit of the screening grid's segments only
         if full is not None and (c not in keep or full.rss < fits[c].rss):
@@ -761,6 +760,14 @@ def _gap(fit: OutputErrorFit, other: OutputErrorFit, floor: float) -> tuple[floa
     variance (both fits see the same noise, so it cancels), and the level within which the two
     tie: the 99 % point of a chi-square with ``fit``'s parameter count."""
     return (fit.rss - other.rss) / (floor * floor), _tie_level(len(fit.values))
+
+
+def _give_up_level(best_rss: float | None, n_parameters: int, floor: float) -> float | None:
+    """The residual energy a fit of ``n_parameters`` gives up above (``give_up_above``):
+    beyond a tie with the best fit so far -- the 99 % chi-square point of its parameters,
+    twice, and a thousandth of the best residual, the crack_not_rub rule's margin; ``None``
+    where there is no best yet."""
+    return None if best_rss is None else best_rss * 1.001 + 2.0 * _tie_level(n_parameters) * floor * floor
 
 
 def _tie_level(n_parameters: int) -> float:
@@ -988,10 +995,7 @@ def diagnose_output_error(
         for c in list(keep):
             advance()
             # best first (ranked): one that cannot come near the best so far gives up
-            # (beyond a tie with it: the 99 % chi-square point of its parameters, twice, and a
-            # thousandth of its residual, the crack_not_rub rule's margin)
-            level = (None if best_rss is None else best_rss * 1.001
-                     + 2.0 * _tie_level(len(fits[c].values)) * floor * floor)
+            level = _give_up_level(best_rss, len(fits[c].values), floor)
             full = _converge(grid, _with_side_load(cur_model, c, lib), c, fits[c], current.x0, level)
             if full is None:
                 del fits[c]
