@@ -71,6 +71,56 @@ def test_white_noise_under_order_locked_misfit_reads_as_white(seed, size):
     assert not got.coloured and got.variance_factor == 1.0, got.log10_p
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("density_ratio", [1.0, 2.0, 0.6])
+def test_the_band_above_the_response_reads_the_noise_models_level(seed, density_ratio):
+    """White noise at ``density_ratio`` times the model's density, under the 25x misfit: the
+    band above the response reads that ratio within three of its standard errors; the floor's
+    factor takes it where it stands clear of the model's level (2 and 0.6) and is the model's
+    (1) where it does not (1), and the bands below, read relative to it, stay white."""
+    t, phi, speed = _run_up()
+    noise = np.random.default_rng(20 + seed).normal(0.0, math.sqrt(density_ratio), (len(t), 2))
+    r = noise + _misfit(phi, speed, 1.0)[:, None] * np.array([1.0, 0.7])
+    got = off_order_noise(t, r, speed, lambda w: [2 * math.pi * 10.0], _white_density(1.0), above=4 * 20.0)
+    assert abs(got.reference - density_ratio) < 3.0 * got.reference_se, (got.reference, got.reference_se)
+    assert got.reference_se < 0.1 * density_ratio
+    assert not got.coloured and got.variance_factor == 1.0
+    if density_ratio == 1.0:
+        assert got.reference_level == 1.0 and got.floor_factor == 1.0
+    else:
+        assert got.reference_level == got.reference and got.floor_factor == got.reference
+        assert np.allclose(got.level_at(np.array([1.0, 50.0, 300.0])), got.reference)
+
+
+def test_a_bow_under_white_and_coloured_probe_noise_is_named_on_the_grids_own_level(one_plane, tmp_path,
+                                                                                     monkeypatch):
+    """A shaft bow at 10 kHz under 0.3 um white noise plus 0.3 um AR(1) noise (rho 0.7, a
+    filtered channel beside the probe's own noise): one AR(1) shape read off the band above the
+    response up to 5 kHz puts the density in the grid's band some 1.6x too low, the same in
+    every band below (so the bands, read relative to the band above the response, look white).
+    Read on the grid's own band above the response, the floor counts it: the bow is named and
+    the record explained.  The control: with the raw band's level (the reference never taken),
+    the record is 'unexplained' at 1.2x and nothing is named (foreign seed 40's bow the same)."""
+    from rotor_env.diagnosis import orders
+    from rotor_env.params import RotorParams
+    from rotor_env.rig_simulation import simulate_rig
+
+    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.4, "bow": 0.004, "bow_phase": 1.0},
+                         effects=("stiffness", "viscous_damping", "unbalance", "shaft_bow"))
+    run = simulate_rig(one_plane, params, natural_rpm=1650.0, rpm_from=300.0, rpm_to=3000.0, rpm_per_s=300.0,
+                       sample_rate=10000.0, noise=0.3, seed=1)
+    run = _with_ar1_noise(run, 0.3, 0.7, seed=11)
+    d = _diagnose(one_plane, run, tmp_path, candidates=("shaft_bow", "asymmetry", "rub"))
+    assert d["missing"] == ["shaft_bow"] and d["verdict"] == "explained_after_adding", (d["missing"], d["verdict"])
+    assert any("on the residual's grid the band above the response reads" in n for n in d["notes"])
+    # the floor: above the white part's 0.3 um, below the two parts' 0.42 um total times 1.5
+    assert 0.3 < d["noise_floor"] < 1.5 * math.hypot(0.3, 0.3)
+    monkeypatch.setattr(orders, "REFERENCE_SIGMAS", math.inf)
+    raw = _diagnose(one_plane, run, tmp_path, candidates=("shaft_bow", "asymmetry", "rub"))
+    assert raw["verdict"] == "unexplained" and raw["missing"] == [], (raw["verdict"], raw["missing"])
+    assert raw["noise_floor"] < 0.85 * d["noise_floor"]
+
+
 def test_the_control_reading_every_bin_calls_the_misfit_coloured(monkeypatch):
     """The control: the same white noise and 25x misfit read at every bin of every window (no
     order, whirl or window left out) is called coloured -- what the exclusions keep out."""
@@ -303,7 +353,7 @@ def test_a_model_that_misses_the_record_far_does_not_read_its_misfit_as_noise(tm
     floor, uncertainty, counted = oe._floor_with_band(base, white, noise)
     assert (floor, uncertainty, counted) == (white, oe.FLOOR_UNCERTAINTY, False)
     note = oe._misfit_between_orders_note(noise, base, white)
-    assert "not counted" in note and f"{base.rms / (white * math.sqrt(noise.variance_factor)):.3g}x" in note
+    assert "not counted" in note and f"{base.rms / (white * math.sqrt(noise.floor_factor)):.3g}x" in note
 
 
 @pytest.mark.parametrize("rho", [0.0, 0.6, 0.9, -0.5])

@@ -328,8 +328,8 @@ def _floor_uncertainty(noise: OffOrderNoise) -> float:
     its variance factor too (a few hundred periodogram bins an octave leave the low octaves'
     levels uncertain by tens of per cent: an effect that takes a share of that noise is not
     relevant for it)."""
-    f = noise.variance_factor
-    return max(FLOOR_UNCERTAINTY, math.sqrt(1.0 + 2.0 * noise.variance_factor_se / f) - 1.0)
+    f = noise.floor_factor
+    return max(FLOOR_UNCERTAINTY, math.sqrt(1.0 + 2.0 * noise.floor_factor_se / f) - 1.0)
 
 
 def _screening_grid(fit: OutputErrorFit) -> tuple[ShootingGrid, np.ndarray, float, int]:
@@ -570,24 +570,25 @@ def in_band_noise(fit: OutputErrorFit) -> OffOrderNoise:
 
 def _floor_with_band(fit: OutputErrorFit, white: float, noise: OffOrderNoise) -> tuple[float, float, bool]:
     """The noise floor off ``fit``'s residual, its relative uncertainty, and whether the noise
-    in the rotor's band counts in it: where the band reads coloured and ``fit`` stands within
-    :data:`COLOUR_MISFIT_RATIO` of the coloured floor; else the level read above the response
-    (``white``), :data:`FLOOR_UNCERTAINTY`."""
-    if noise.variance_factor > 1.0:
-        coloured = white * math.sqrt(noise.variance_factor)
+    read on the residual's grid counts in it: where the band reads coloured, or the band above
+    the response reads off the model's level (:attr:`.orders.OffOrderNoise.reference_level`),
+    and ``fit`` stands within :data:`COLOUR_MISFIT_RATIO` of that floor; else the level read
+    above the response on the raw record (``white``), :data:`FLOOR_UNCERTAINTY`."""
+    if noise.floor_factor != 1.0:
+        coloured = white * math.sqrt(noise.floor_factor)
         if fit.rms <= COLOUR_MISFIT_RATIO * coloured:
             return coloured, _floor_uncertainty(noise), True
     return white, FLOOR_UNCERTAINTY, False
 
 
 def _misfit_between_orders_note(noise: OffOrderNoise, fit: OutputErrorFit, white: float) -> str:
-    """Why a coloured reading between the orders was not counted in the floor."""
-    coloured = white * math.sqrt(noise.variance_factor)
-    return (f"the band between the shaft's orders reads above the level read above the response (the floor would be "
-            f"{math.sqrt(noise.variance_factor):.4g}x it), but the model misses the record by {fit.rms / coloured:.3g}x "
-            f"even that floor (more than {COLOUR_MISFIT_RATIO:g}x): its shooting segments' start states take the misfit's "
-            "local shape and the residual steps at every cut, which reads as noise between the orders -- not counted: "
-            "the floor is the level read above the response")
+    """Why the noise read on the residual's grid was not counted in the floor."""
+    coloured = white * math.sqrt(noise.floor_factor)
+    return (f"the residual's noise between the shaft's orders reads off the level read above the response (the floor "
+            f"would be {math.sqrt(noise.floor_factor):.4g}x it), but the model misses the record by "
+            f"{fit.rms / coloured:.3g}x even that floor (more than {COLOUR_MISFIT_RATIO:g}x): its shooting segments' "
+            "start states take the misfit's local shape and the residual steps at every cut, which reads as noise "
+            "between the orders -- not counted: the floor is the level read above the response")
 
 
 def _fitted_stiffness(fit: OutputErrorFit) -> float:
@@ -599,15 +600,24 @@ def _fitted_stiffness(fit: OutputErrorFit) -> float:
 
 
 def _coloured_note(noise: OffOrderNoise, fit: OutputErrorFit) -> str:
-    """What the in-band noise did to the floor, the bands named in the natural frequency."""
-    per = 2.0 * math.pi / math.sqrt(_fitted_stiffness(fit))  # cycles per unit time -> per natural frequency
-    bands = ", ".join(f"{r:.3g}x at {lo * per:.2g}-{hi * per:.2g}"
-                      for (lo, hi), r, up in zip(noise.bands, noise.ratio, noise.raised, strict=True) if up)
-    return (f"the probes' noise is coloured in the rotor's band (log10 p = {noise.log10_p:.3g} that it is at the level "
-            f"read above the response): away from the shaft's orders and the free whirl the residual's density is "
-            f"{bands or 'within two standard errors in each band, above it together'} times that level (bands in "
-            f"multiples of the natural frequency); the floor counts it: {math.sqrt(noise.variance_factor):.4g}x the "
-            "level read above the response")
+    """What the noise read on the residual's grid did to the floor, the bands named in the
+    natural frequency."""
+    said = []
+    if noise.reference_level != 1.0:
+        said.append(f"on the residual's grid the band above the response reads {noise.reference:.3g} +- "
+                    f"{1.96 * noise.reference_se:.2g} times the noise model read off the record's band above the "
+                    "response up to its Nyquist frequency: the noise is not of one first-order shape (white noise "
+                    "with a coloured part, a filter's slope), and the level where the fit reads counts")
+    if noise.variance_factor > 1.0:
+        per = 2.0 * math.pi / math.sqrt(_fitted_stiffness(fit))  # cycles per unit time -> per natural frequency
+        bands = ", ".join(f"{r:.3g}x at {lo * per:.2g}-{hi * per:.2g}"
+                          for (lo, hi), r, up in zip(noise.bands, noise.ratio, noise.raised, strict=True) if up)
+        said.append(f"the probes' noise is coloured in the rotor's band (log10 p = {noise.log10_p:.3g} that it is at "
+                    "the level read above the response): away from the shaft's orders and the free whirl the "
+                    f"residual's density is {bands or 'within two standard errors in each band, above it together'} "
+                    "times that level (bands in multiples of the natural frequency)")
+    return (f"{'; '.join(said)}; the floor counts it: {math.sqrt(noise.floor_factor):.4g}x the level read above the "
+            "response")
 
 
 def _half_turn_orientation(effect: str):
@@ -1148,9 +1158,9 @@ def diagnose_output_error(
     floor, unc, counted = _floor_with_band(current, white, in_band)
     if counted:
         notes.append(_coloured_note(in_band, current))
-        say(f"the probes' noise is coloured in the rotor's band: the floor {math.sqrt(in_band.variance_factor):.4g}x "
+        say(f"the probes' noise in the rotor's band counted: the floor {math.sqrt(in_band.floor_factor):.4g}x "
             "the level above the response")
-    elif in_band.variance_factor > 1.0:
+    elif in_band.floor_factor != 1.0:
         notes.append(_misfit_between_orders_note(in_band, current, white))
     # one model for the whole record: is it the same rotor all through? (a crack that opens
     # above the critical barely lifts the residual, but the fit's scores drift at its onset)

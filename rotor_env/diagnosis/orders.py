@@ -97,6 +97,9 @@ MIN_BAND_BINS = 32
 #: coloured where its p-value is below this (a white record is read as coloured once in a
 #: thousand; where it is, the bands' own levels count, which scatter about one)
 COLOURED_P = 1e-3
+#: the band above the response on the residual's grid moves the noise model's level where it
+#: reads this many standard errors from it (:attr:`OffOrderNoise.reference_level`)
+REFERENCE_SIGMAS = 3.0
 
 
 @dataclass(frozen=True)
@@ -107,13 +110,31 @@ class OffOrderNoise:
     ``bands``: ``(lo, hi)`` of each octave (cycles per unit of time); ``ratio``: its level over
     the model's, relative to the band above the response (``nan`` where fewer than
     :data:`MIN_BAND_BINS` bins were read); ``se``: its standard error; ``weight``: each band's
-    share of the model's noise power; ``bins``: periodogram bins read in it."""
+    share of the model's noise power; ``bins``: periodogram bins read in it; ``reference``:
+    the level of the band above the response itself over the model's (1 where too few bins
+    were read), ``reference_se`` its standard error."""
 
     bands: tuple[tuple[float, float], ...]
     ratio: np.ndarray
     se: np.ndarray
     weight: np.ndarray
     bins: np.ndarray
+    reference: float = 1.0
+    reference_se: float = 0.0
+
+    @property
+    def reference_level(self) -> float:
+        """The level the noise model takes on the residual's own grid: :attr:`reference` where
+        it stands more than :data:`REFERENCE_SIGMAS` standard errors from the model's, else 1.
+        The model is read off the raw record's band above the response, up to its Nyquist
+        frequency, as one AR(1) shape; noise that is not one (white noise plus a coloured part,
+        as a probe driver's filter leaves beside its white noise) is extrapolated from kHz down
+        to the grid's band wrongly: a foreign bow at 0.3 um white plus 0.3 um AR(1) (rho 0.7,
+        10 kHz) read 2.0x the model's density on the grid above the response and in every band
+        below it -- a bow's record "unexplained" at 1.32x a floor 6 % under the truth."""
+        if self.reference_se > 0 and abs(self.reference - 1.0) > REFERENCE_SIGMAS * self.reference_se:
+            return float(self.reference)
+        return 1.0
 
     @property
     def read(self) -> np.ndarray:
@@ -172,13 +193,29 @@ class OffOrderNoise:
                 for b in np.flatnonzero(~self.read) if read.size and read[0] < b < read[-1]]
 
     def level_at(self, nu: np.ndarray) -> np.ndarray:
-        """:attr:`level` at the frequencies ``nu`` (cycles per unit of time): each band's,
-        the model's (1) where no band covers them -- as :attr:`variance_factor` counts it."""
+        """The noise's density over the model's at the frequencies ``nu`` (cycles per unit of
+        time), as the floor counts it (:attr:`floor_factor`): each band's :attr:`level`, the
+        model's (1) where no band covers them, all times :attr:`reference_level`."""
         nu = np.asarray(nu, dtype=float)
         out = np.ones_like(nu)
         for (lo, hi), lv in zip(self.bands, self.level, strict=True):
             out[(nu >= lo) & (nu < hi)] = lv
-        return out
+        return out * self.reference_level
+
+    @property
+    def floor_factor(self) -> float:
+        """The noise's variance on the residual's grid over the model's: the
+        :attr:`variance_factor` of the bands times :attr:`reference_level`."""
+        return self.variance_factor * self.reference_level
+
+    @property
+    def floor_factor_se(self) -> float:
+        """The standard error of :attr:`floor_factor`: the bands' and, where it counts, the
+        reference's, combined relative."""
+        rel = self.variance_factor_se / self.variance_factor
+        if self.reference_level != 1.0:
+            rel = math.hypot(rel, self.reference_se / self.reference)
+        return rel * self.floor_factor
 
     @property
     def variance_factor(self) -> float:
@@ -235,7 +272,9 @@ def off_order_noise(t: np.ndarray, residual: np.ndarray, speed: np.ndarray, whir
     # the reference: above the response, read with the shortest window (the most bins there)
     ratio0, at0, _ = reads[0]
     ref_sel = at0 > above
-    ref = float(np.median(ratio0[ref_sel]) / math.log(2.0)) if ref_sel.sum() >= MIN_BAND_BINS else 1.0
+    m_ref = int(ref_sel.sum())
+    ref = float(np.median(ratio0[ref_sel]) / math.log(2.0)) if m_ref >= MIN_BAND_BINS else 1.0
+    ref_se = 1.44 * math.sqrt(3.0 / m_ref) * ref if m_ref >= MIN_BAND_BINS else 0.0
     lowest = min(LEAK_BINS * df for _, _, df in reads)
     edges = [top]
     while edges[-1] / 2 > lowest:
@@ -254,7 +293,8 @@ def off_order_noise(t: np.ndarray, residual: np.ndarray, speed: np.ndarray, whir
         ses.append(1.44 * math.sqrt(3.0 / max(m, 1)) * R)
         wt.append(float(np.sum(dens[inside]) * (fine[1] - fine[0])) / total if total > 0 else 0.0)
         cnt.append(m)
-    return OffOrderNoise(tuple(bands), np.array(lev), np.array(ses), np.array(wt), np.array(cnt, dtype=int))
+    return OffOrderNoise(tuple(bands), np.array(lev), np.array(ses), np.array(wt), np.array(cnt, dtype=int),
+                         ref, ref_se)
 
 
 def _off_order_bins(r: np.ndarray, f1: np.ndarray, dt: float, L: int, density, whirl,
