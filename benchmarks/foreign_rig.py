@@ -105,7 +105,9 @@ notch 4 % of a turn, its leading edge at the notch angle: no ramp); two proximit
 +45 and -45 deg from ``x`` (the rig file's ``{"x": 45, "y": -45}``: angles in the direction of
 rotation), each reading the disk's displacement towards itself, ``x cos a + y sin a``, in um,
 plus a DC gap (900-1400 um), plus Gaussian white noise of the given std (``--noise``), plus
-optionally first-order coloured noise (``--colour RHO``: an AR(1) part of the same std).  The
+optionally first-order coloured noise (``--colour RHO``: an AR(1) part of the same std), and
+optionally every channel through the same analog anti-alias filter (``--anti-alias``: a 4-pole
+Butterworth at ``fs / 2.56``, :func:`filter_channel`).  The
 file is Parquet (pyarrow) with columns ``t`` (s), ``kp`` (V), ``x``, ``y`` (um); the rig file
 ``{"keyphasor": "kp", "probes": {"x": 45, "y": -45}, "units": {"displacement": "um"}}``.
 Integrated by ``scipy.integrate.solve_ivp`` (DOP853, rtol 1e-9, atol 1e-13 m / 1e-11 m/s) with
@@ -498,6 +500,8 @@ class Record:
     direction: str
     colour: float = 0.0
     gaps_um: tuple[float, float] = (0.0, 0.0)
+    #: every channel through a DAQ's analog anti-alias filter (:func:`anti_alias`)
+    anti_alias: bool = False
     runout: tuple[tuple[float, float], ...] = ()   #: per probe (amplitude um, angle rad from the notch)
 
 
@@ -588,6 +592,17 @@ def probe_readings(rec: Record, t: np.ndarray, xy: np.ndarray) -> dict[str, np.n
     return out
 
 
+def filter_channel(x: np.ndarray, fs: float) -> np.ndarray:
+    """A DAQ's analog anti-alias filter, the same on every channel (``--anti-alias``): a 4-pole
+    Butterworth low-pass at ``fs / 2.56`` (the vibration analysers' convention: the useful
+    band to ``fs / 2.56``), causal, started settled at the channel's first value.  It colours
+    the noise (rolled off towards Nyquist) and delays every channel alike."""
+    from scipy.signal import butter, sosfilt, sosfilt_zi
+
+    sos = butter(4, 2.0 / 2.56, output="sos")
+    return sosfilt(sos, x, zi=sosfilt_zi(sos) * x[0])[0]
+
+
 def true_noise_um(rec: Record) -> float:
     return rec.noise_um * (math.sqrt(2.0) if rec.colour else 1.0)
 
@@ -599,7 +614,7 @@ def orbit_peak(xy: np.ndarray) -> float:
 
 def make_record(case: str, seed: int, noise_um: float, *, fs: float | None = None, colour: float = 0.0,
                 crack_law: str = "mayes", psi_deg: float | None = None,
-                profile: str = "linear") -> tuple[Record, np.ndarray, dict]:
+                profile: str = "linear", anti_alias: bool = False) -> tuple[Record, np.ndarray, dict]:
     """Simulate one record: the :class:`Record`, its sample times, its columns and the truth."""
     rotor, daq = draw_rotor(seed, case, fs=fs, crack_law=crack_law, psi_deg=psi_deg, profile=profile)
     t = sample_times(rotor, daq["fs"])
@@ -612,9 +627,11 @@ def make_record(case: str, seed: int, noise_um: float, *, fs: float | None = Non
         rotor = replace(rotor, p=p)
         truth["healthy_peak_um"] = peak * 1e6
     rec = Record(case=case, seed=seed, noise_um=float(noise_um), fs=daq["fs"], rotor=rotor, direction=daq["direction"],
-                 colour=colour, gaps_um=daq["gaps_um"], runout=daq.get("runout", ()))
+                 colour=colour, gaps_um=daq["gaps_um"], runout=daq.get("runout", ()), anti_alias=anti_alias)
     xy = integrate(rotor, t)
     cols = {"t": t, "kp": keyphasor(rotor, t), **probe_readings(rec, t, xy)}
+    if anti_alias:
+        cols.update({k: filter_channel(v, rec.fs) for k, v in cols.items() if k != "t"})
     truth.update(describe_truth(rec, xy))
     return rec, t, {"columns": cols, "truth": truth}
 
@@ -842,12 +859,12 @@ def judge(case: str, truth: dict, d: dict, true_noise: float) -> dict:
 
 def run_one(case: str, seed: int, noise_um: float, *, fs: float | None = None, colour: float = 0.0,
             crack_law: str = "mayes", psi_deg: float | None = None, keep: Path | None = None,
-            profile: str = "linear") -> dict:
+            profile: str = "linear", anti_alias: bool = False) -> dict:
     """Simulate, write, read back and diagnose one record; its outcome (JSON-able)."""
     t0 = time.perf_counter()
     try:
         rec, t, made = make_record(case, seed, noise_um, fs=fs, colour=colour, crack_law=crack_law, psi_deg=psi_deg,
-                                   profile=profile)
+                                   profile=profile, anti_alias=anti_alias)
     except SimulatorUnstable as exc:  # no record to diagnose: said apart, not a product error
         rotor, daq = draw_rotor(seed, case, fs=fs, crack_law=crack_law, psi_deg=psi_deg, profile=profile)
         return {"case": case, "seed": seed, "noise_um": noise_um, "fs": daq["fs"], "colour": colour,
@@ -949,6 +966,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--profile", choices=("linear", "motor", "updown"), default="linear",
                     help="the speed's course: constant acceleration, a motor's (fast first, slow at the end), or "
                          "updown (there, a dwell, and back in one record)")
+    ap.add_argument("--anti-alias", action="store_true",
+                    help="every channel (keyphasor and probes) through a DAQ's 4-pole Butterworth at fs / 2.56")
     ap.add_argument("--keep", default=None, help="folder to keep the written records in")
     ap.add_argument("--out", default=None, help="JSON of every outcome")
     args = ap.parse_args(argv)
@@ -967,7 +986,8 @@ def main(argv: list[str] | None = None) -> int:
     for case in cases:
         for noise in noises:
             o = run_one(case, args.seed, noise, fs=args.fs, colour=args.colour, crack_law=args.crack_law,
-                        keep=Path(args.keep) if args.keep else None, profile=args.profile)
+                        keep=Path(args.keep) if args.keep else None, profile=args.profile,
+                        anti_alias=args.anti_alias)
             outcomes.append(o)
             status = ("SIMULATOR UNSTABLE " + o["unstable"]) if "unstable" in o else ("ERROR " + o["error"]) if "error" in o else (
                 f"{'ok ' if o['right'] else 'BAD'} named {o['named']} floor {o['floor_ratio'] or math.nan:.2f}x "
