@@ -117,6 +117,22 @@ def test_noise_below_a_falling_model_lowers_the_floor(seed):
     assert np.sqrt(got.floor_factor) < 0.5  # the model's floor (1) would be more than twice too high
 
 
+def _open_crack_run(rig, noise: float):
+    """A 2.5 kHz run-up (300-3000 rpm at 300 rpm/s, 1650 rpm critical) of an open crack drawn
+    from seed 2 (D 0.0315, stiff axis 53.7 deg) under ``noise`` um of white probe noise: the
+    run, D and the axis (deg)."""
+    from rotor_env.params import RotorParams
+    from rotor_env.rig_simulation import simulate_rig
+
+    rng = np.random.default_rng(2)
+    D, axis = float(rng.uniform(0.025, 0.05)), float(rng.uniform(0, 180))
+    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.4, "D": D, "D_axis": math.radians(axis)},
+                         effects=("stiffness", "viscous_damping", "unbalance", "asymmetry"))
+    run = simulate_rig(rig, params, natural_rpm=1650.0, rpm_from=300.0, rpm_to=3000.0, rpm_per_s=300.0,
+                       sample_rate=2500.0, noise=noise, seed=2)
+    return run, D, axis
+
+
 def test_a_crack_through_a_daqs_anti_alias_filter_keeps_its_floor(one_plane, tmp_path, monkeypatch):
     """Every channel of a 2.5 kHz record (an open crack, D 0.0315 at 53.7 deg, 0.5 um white
     probe noise) through the same 4-pole Butterworth at fs / 2.56, as a vibration DAQ's analog
@@ -130,18 +146,11 @@ def test_a_crack_through_a_daqs_anti_alias_filter_keeps_its_floor(one_plane, tmp
     from pathlib import Path
 
     from rotor_env.diagnosis import orders
-    from rotor_env.params import RotorParams
-    from rotor_env.rig_simulation import simulate_rig
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from foreign_rig import filter_channel
 
-    rng = np.random.default_rng(2)
-    D, axis = float(rng.uniform(0.025, 0.05)), float(rng.uniform(0, 180))
-    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.4, "D": D, "D_axis": math.radians(axis)},
-                         effects=("stiffness", "viscous_damping", "unbalance", "asymmetry"))
-    run = simulate_rig(one_plane, params, natural_rpm=1650.0, rpm_from=300.0, rpm_to=3000.0, rpm_per_s=300.0,
-                       sample_rate=2500.0, noise=0.5, seed=2)
+    run, D, axis = _open_crack_run(one_plane, 0.5)
     cols = dict(run.columns)
     for name in ("kp", "x", "y"):
         cols[name] = filter_channel(np.asarray(cols[name], float), 2500.0)
@@ -478,15 +487,8 @@ def test_an_open_crack_under_ar1_probe_noise_is_named_with_its_size_and_axis(one
     The control: counted in white noise variances (the rule as it was), the crack is turned
     down as a rub's contact and nothing is named."""
     from rotor_env.diagnosis import oe_diagnosis
-    from rotor_env.params import RotorParams
-    from rotor_env.rig_simulation import simulate_rig
 
-    rng = np.random.default_rng(2)
-    D, axis = float(rng.uniform(0.025, 0.05)), float(rng.uniform(0, 180))
-    params = RotorParams(ip=0.0, values={"c": 0.04, "tau": 0.005, "beta": 0.4, "D": D, "D_axis": math.radians(axis)},
-                         effects=("stiffness", "viscous_damping", "unbalance", "asymmetry"))
-    run = simulate_rig(one_plane, params, natural_rpm=1650.0, rpm_from=300.0, rpm_to=3000.0, rpm_per_s=300.0,
-                       sample_rate=2500.0, noise=0.35, seed=2)
+    run, D, axis = _open_crack_run(one_plane, 0.35)
     run = _with_ar1_noise(run, 0.35, 0.9, seed=12)
     d = _diagnose(one_plane, run, tmp_path, candidates=("asymmetry", "rub"))
     assert d["missing"] == ["asymmetry"], (d["missing"], d["rejected"])
