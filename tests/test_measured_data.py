@@ -465,8 +465,10 @@ def test_probe_track_runout_is_no_backward_whirl(rig):
     assert "runout" in out["missing"]
     mirrored = VectorTable(worn.speed, worn.t, worn.probes, worn.vectors, worn.amp_unit, angles=-worn.angles,
                            source="mirrored.csv")
-    with pytest.raises(VectorTableError, match="backward"):
+    with pytest.raises(VectorTableError, match="backward") as refused:
         check_whirl_direction(mirrored, 0.3)
+    # the other reading of a backward 1X, said: a crack under a large static load
+    assert "backward 1X forcing dominates" in str(refused.value) and "mirrored" in str(refused.value)
 
 
 def test_a_table_without_time_is_fitted_quasi_steady(rig):
