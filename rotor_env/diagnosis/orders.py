@@ -132,8 +132,8 @@ class OffOrderNoise:
         frequency, as one AR(1) shape; noise that is not one (white noise plus a coloured part,
         as a probe driver's filter leaves beside its white noise) is extrapolated from kHz down
         to the grid's band wrongly: a foreign bow at 0.3 um white plus 0.3 um AR(1) (rho 0.7,
-        10 kHz) read 2.0x the model's density on the grid above the response and in every band
-        below it -- a bow's record "unexplained" at 1.32x a floor 6 % under the truth."""
+        10 kHz) read 1.64x the model's density on the grid above the response and alike in every
+        band below it -- the bow's record "unexplained" at 1.32x, nothing named."""
         if self.reference_se > 0 and abs(self.reference - 1.0) > REFERENCE_SIGMAS * self.reference_se:
             return float(self.reference)
         return 1.0
@@ -190,7 +190,7 @@ class OffOrderNoise:
         the bands are :attr:`coloured` (the noise's shape there is what the lowest octave
         read says, not the model's), else the model's (1)."""
         first = self._first_read()
-        return float(self.ratio[first]) if self.coloured and first is not None else 1.0
+        return float(self.level[first]) if self.coloured and first is not None else 1.0
 
     @property
     def variance_factor_se(self) -> float:
@@ -217,8 +217,9 @@ class OffOrderNoise:
 
     def level_at(self, nu: np.ndarray) -> np.ndarray:
         """The noise's density over the model's at the frequencies ``nu`` (cycles per unit of
-        time), as the floor counts it (:attr:`floor_factor`): each band's :attr:`level`, the
-        model's (1) where no band covers them, all times :attr:`reference_level`."""
+        time), as the floor counts it (:attr:`floor_factor`): each band's :attr:`level`, below
+        the lowest band :attr:`level_below`, above the bands the model's (1), all times
+        :attr:`reference_level`."""
         nu = np.asarray(nu, dtype=float)
         out = np.ones_like(nu)
         if self.bands:
