@@ -66,7 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..effects import EFFECTS
+from ..effects import EFFECTS, crack_effects
 from ..measurements.artefacts import remove_artefacts
 from ..measurements.drift import drift_knot_spacing, drift_note, probe_drift, remove_drift
 from ..measurements.keyphasor import smooth_spin
@@ -74,12 +74,13 @@ from ..measurements.rig import SPEED_UNITS
 from ..measurements.waveforms import LENGTH_UNIT, RigRecord, WaveformError
 from ..results import Result
 from .change import parameter_constancy
-from .from_vectors import ABOVE_RUN, VectorDiagnosis, diagnose_vectors
+from .from_vectors import ABOVE_RUN, BackwardWhirlError, VectorDiagnosis, diagnose_vectors
 from .model import DEFAULT_MODEL, LIBRARY_CANDIDATES
 from .oe_diagnosis import (
     CONVERGE_ITERATIONS,
     EXPLAINED_RATIO,
     OutputErrorDiagnosis,
+    crack_fits_under_load,
     diagnose_output_error,
     splits,
     with_parts,
@@ -99,6 +100,12 @@ from .synchronous.fit import VectorFit, fit_vectors
 
 __all__ = ["RigDiagnosis", "closest_reading", "diagnose_rig", "exchanged_modes", "one_mode_band"]
 
+#: where the 1X whirl turns backward, each crack's side load is started at this many times the
+#: record's peak amplitude (:func:`_backward_whirl`)
+BACKWARD_LOAD_START = 1.5
+#: ... and the record is refused at once where no crack so fitted comes within this many times
+#: the probes' noise (a healthy record read with mirrored angles: 40 s of search for a refusal)
+BACKWARD_CRACK_RATIO = 1.5
 #: the waveforms are fitted on the first mode's band only where it holds this many revolutions
 MIN_BAND_REVOLUTIONS = 50
 #: on a run with no critical speed in it, the waveforms' natural frequency and the 1X vectors'
@@ -520,7 +527,11 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
     # that a model's own slow response (a cracked shaft's mean deflection under its load
     # changes with the speed) is fitted, not taken out of the data alone
     drift = probe_drift(record)
-    vd = diagnose_vectors(remove_drift(record, drift).vectors((1,)), ip=ip, alpha=alpha)
+    try:
+        vd = diagnose_vectors(remove_drift(record, drift).vectors((1,)), ip=ip, alpha=alpha)
+    except BackwardWhirlError as refused:
+        return _backward_whirl(record, drift, refused, model, candidates=candidates, alpha=alpha,
+                               progress=progress)
     if RUNOUT in vd.missing and record.rig.slow_roll_rpm is None:
         # runout seen in the 1X vectors: the waveforms' output-error fit carries a probe
         # track's 1X pattern fixed to the shaft with every model.  The slow-roll pattern is
@@ -664,6 +675,49 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
         f"lacks; without its 1X response, on the band where the other mode carries the response, the waveforms "
         f"are still {' and '.join(tried)} the floor (each mode taken as the model's in turn): not explained "
         "either way"))), vd, plain.diagnosis, w_ref)
+
+
+def _backward_whirl(record: RigRecord, drift, refused: BackwardWhirlError, model: Sequence[str], *,
+                    candidates: Sequence[str] | None, alpha: float, progress: bool) -> RigDiagnosis:
+    """A record whose 1X whirl turns backward at most speeds: diagnosed where a crack under a
+    static load explains it, else refused (``refused`` raised again).
+
+    Mirrored probe angles turn an unbalance's forward 1X backward; so does a cracked shaft
+    whose static deflection under its load is many times its unbalance (the crack's stiffness
+    turning against the fixed deflection drives a 1X both ways).  Its side load is then many
+    times the response, which the search, started at no load, does not reach (the crack's
+    moment is the product of the two): each crack is fitted from load starts of
+    :data:`BACKWARD_LOAD_START` times the record's peak (:func:`.oe_diagnosis.crack_fits_under_load`)
+    and the search starts its cracks from those fits too, on the time scale of the 1X vectors'
+    final model (their start model, an unbalance, does not hold a backward 1X: a foreign
+    coast-down's put the critical at 2902 rpm, the final model's at 1831, the truth 1800).
+    Taken only where a crack is named and the record explained, with a note."""
+    from ..progress import step
+
+    step("the 1X whirl turns backward: a crack under a static load tried")
+    vd = diagnose_vectors(remove_drift(record, drift).vectors((1,)), ip=record.rig.ip, alpha=alpha,
+                          check_direction=False)
+    w_ref = vd.after.w_ref
+    cands = [c for c in (candidates if candidates is not None else LIBRARY_CANDIDATES) if c not in model]
+    cracks = [c for c in cands if c in crack_effects()]
+    if not math.isfinite(w_ref) or not cracks:
+        raise refused
+    grid, _ = waveform_grid(record, w_ref)
+    unit_scale = (LENGTH_UNIT / record.rig.to_metres(1.0)) if record.rig.model == "translation" else 1e6
+    unit = record.rig.amp_unit if record.rig.model == "translation" else "urad"
+    load = BACKWARD_LOAD_START * float(np.max(np.hypot(grid.y[:, 0], grid.y[:, 1])))
+    seeds = crack_fits_under_load(grid, model, cracks, load)
+    if not seeds or min(f.rms for f in seeds.values()) > BACKWARD_CRACK_RATIO * float(grid.noise_std):
+        raise refused  # no crack under a load comes near the record: the angles are the likelier reading
+    d = diagnose_output_error(grid, list(model), cands, alpha=alpha, unit_scale=unit_scale, unit=unit,
+                              progress=progress, split=False, seeds=seeds)
+    if d.verdict not in ("explained", "explained_after_adding") or not any(e in crack_effects() for e in d.missing):
+        raise refused
+    note = (f"the 1X whirl turns backward at {100 * refused.share:.0f} % of the speeds, as mirrored probe angles "
+            "would also make it: a crack under a static load many times its unbalance drives such a 1X, and one "
+            f"explains the record ({', '.join(d.missing)} named, {d.rms_ratio_after:.3g}x the floor): the angles "
+            "are taken as given (where no crack explains such a record, it is refused)")
+    return RigDiagnosis(replace(record, notes=(*record.notes, note)), vd, d, w_ref)
 
 
 def check_by_waveforms(rd: RigDiagnosis, alpha: float = 0.05) -> RigDiagnosis:

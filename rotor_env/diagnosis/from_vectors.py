@@ -33,12 +33,13 @@ from scipy.optimize import nnls
 from identifier.hac import hac_covariance, wald_test
 
 from ..effects import get_effect
-from ..measurements.vectors import SPEED_UNITS, VectorTable, to_phase
+from ..measurements.vectors import SPEED_UNITS, VectorTable, VectorTableError, to_phase
 from ..results import Result, jsonable
 from .synchronous import RUNOUT, SECOND_MODE, SynchronousModel, VectorFit, fit_vectors
 from .verdict import FLOOR_RATIO, verdict_of
 
-__all__ = ["ABOVE_RUN", "VECTOR_CANDIDATES", "VECTOR_MODEL", "VectorDiagnosis", "check_whirl_direction", "diagnose_vectors",
+__all__ = ["ABOVE_RUN", "VECTOR_CANDIDATES", "VECTOR_MODEL", "BackwardWhirlError", "VectorDiagnosis",
+           "check_whirl_direction", "diagnose_vectors",
            "vector_noise_floor"]
 
 VECTOR_MODEL: tuple[str, ...] = ("viscous_damping", "unbalance")
@@ -127,6 +128,15 @@ BACKWARD_SHARE = 0.7
 SLOW_ROLL_SHARE = 0.4
 
 
+class BackwardWhirlError(VectorTableError):
+    """The 1X whirl turns backward at most speeds (:func:`check_whirl_direction`); ``share``:
+    at which share of the speeds read."""
+
+    def __init__(self, message: str, share: float):
+        super().__init__(message)
+        self.share = share
+
+
 def check_whirl_direction(table: VectorTable, floor: float) -> None:
     """Refuse probe angles (or a rotation direction) under which the 1X whirl turns backward.
 
@@ -143,7 +153,6 @@ def check_whirl_direction(table: VectorTable, floor: float) -> None:
     """
     if table.angles is None or len(table.probes) < 2:
         return
-    from ..measurements.vectors import VectorTableError
     from .synchronous import vector_probe_matrix
 
     P = vector_probe_matrix(table)
@@ -163,14 +172,14 @@ def check_whirl_direction(table: VectorTable, floor: float) -> None:
     share = float(np.mean(bwd[clear] > fwd[clear]))
     if share > BACKWARD_SHARE:
         deg = ", ".join(f"{p} {math.degrees(a):g}" for p, a in zip(table.probes, table.angles, strict=True))
-        raise VectorTableError(
+        raise BackwardWhirlError(
             f"{table.source}: with the probes' mounting angles ({deg} deg) the 1X whirl turns backward at "
             f"{100 * share:.0f} % of the speeds, where an unbalance drives a forward whirl: the angles (rig key "
             "'probes') are swapped or mirrored, or measured against the rotation; angles are counted from the "
             "reference in the direction of rotation.  Where the angles are right, a backward 1X forcing dominates "
             "the record, which this diagnosis does not read: a cracked shaft whose static deflection under its "
             "load is many times its unbalance drives one (a foreign coast-down, sag 276 um against 3.4 um of "
-            "unbalance: backward at 87 % of the speeds)")
+            "unbalance: backward at 87 % of the speeds)", share)
 
 
 def _time_major(fit: VectorFit) -> tuple[np.ndarray, np.ndarray, int]:
@@ -501,9 +510,12 @@ def diagnose_vectors(
     method: str = "auto",
     max_added: int = 3,
     phase: str = "lag",
+    check_direction: bool = True,
 ) -> VectorDiagnosis:
-    """Fit ``model`` to the table's 1X vectors and add the missing effects one by one."""
-    check_whirl_direction(table, vector_noise_floor(table))
+    """Fit ``model`` to the table's 1X vectors and add the missing effects one by one;
+    ``check_direction``: refuse a backward whirl first (:func:`check_whirl_direction`)."""
+    if check_direction:
+        check_whirl_direction(table, vector_noise_floor(table))
     base_effects = tuple(e for e in model if e != RUNOUT)
     start_model = SynchronousModel(base_effects, ip=ip, runout=RUNOUT in model)
     before = fit_vectors(table, start_model, method=method)
