@@ -202,13 +202,11 @@ class RigDiagnosis(Result):
     @property
     def unit_scale(self) -> float:
         """Dimensionless displacement -> the rig's reporting unit."""
-        if self.record.rig.model != "translation":
-            return 1e6  # rad -> urad
-        return LENGTH_UNIT / self.record.rig.to_metres(1.0)
+        return reporting_unit(self.record)[0]
 
     @property
     def rms_unit(self) -> str:
-        return "urad" if self.record.rig.model != "translation" else self.record.rig.amp_unit
+        return reporting_unit(self.record)[1]
 
     def to_dict(self) -> dict:
         d = dict(self.diagnosis.to_dict())
@@ -527,11 +525,12 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
     # that a model's own slow response (a cracked shaft's mean deflection under its load
     # changes with the speed) is fitted, not taken out of the data alone
     drift = probe_drift(record)
+    table = remove_drift(record, drift).vectors((1,))
+    cands = [c for c in (candidates if candidates is not None else LIBRARY_CANDIDATES) if c not in model]
     try:
-        vd = diagnose_vectors(remove_drift(record, drift).vectors((1,)), ip=ip, alpha=alpha)
+        vd = diagnose_vectors(table, ip=ip, alpha=alpha)
     except BackwardWhirlError as refused:
-        return _backward_whirl(record, drift, refused, model, candidates=candidates, alpha=alpha,
-                               progress=progress)
+        return _backward_whirl(record, table, refused, model, cands, alpha=alpha, progress=progress)
     if RUNOUT in vd.missing and record.rig.slow_roll_rpm is None:
         # runout seen in the 1X vectors: the waveforms' output-error fit carries a probe
         # track's 1X pattern fixed to the shaft with every model.  The slow-roll pattern is
@@ -556,9 +555,7 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
     step("waveforms: the output-error fit of every candidate")
     if not math.isfinite(w_ref):  # pragma: no cover - fit_vectors returns finite values
         raise RuntimeError("no natural frequency identified")
-    cands = [c for c in (candidates if candidates is not None else LIBRARY_CANDIDATES) if c not in model]
-    unit_scale = (LENGTH_UNIT / record.rig.to_metres(1.0)) if record.rig.model == "translation" else 1e6
-    unit = record.rig.amp_unit if record.rig.model == "translation" else "urad"
+    unit_scale, unit = reporting_unit(record)
 
     def waveforms(rec: RigRecord, w: float = w_ref, tried: Sequence[str] = cands,
                   mode: SecondMode | None = None, split: bool = True) -> OutputErrorDiagnosis:
@@ -677,8 +674,8 @@ def _diagnose(record: RigRecord, model: Sequence[str], *, candidates: Sequence[s
         "either way"))), vd, plain.diagnosis, w_ref)
 
 
-def _backward_whirl(record: RigRecord, drift, refused: BackwardWhirlError, model: Sequence[str], *,
-                    candidates: Sequence[str] | None, alpha: float, progress: bool) -> RigDiagnosis:
+def _backward_whirl(record: RigRecord, table, refused: BackwardWhirlError, model: Sequence[str],
+                    cands: Sequence[str], *, alpha: float, progress: bool) -> RigDiagnosis:
     """A record whose 1X whirl turns backward at most speeds: diagnosed where a crack under a
     static load explains it, else refused (``refused`` raised again).
 
@@ -695,21 +692,18 @@ def _backward_whirl(record: RigRecord, drift, refused: BackwardWhirlError, model
     from ..progress import step
 
     step("the 1X whirl turns backward: a crack under a static load tried")
-    vd = diagnose_vectors(remove_drift(record, drift).vectors((1,)), ip=record.rig.ip, alpha=alpha,
-                          check_direction=False)
+    vd = diagnose_vectors(table, ip=record.rig.ip, alpha=alpha, check_direction=False)
     w_ref = vd.after.w_ref
-    cands = [c for c in (candidates if candidates is not None else LIBRARY_CANDIDATES) if c not in model]
     cracks = [c for c in cands if c in crack_effects()]
     if not math.isfinite(w_ref) or not cracks:
         raise refused
     grid, _ = waveform_grid(record, w_ref)
-    unit_scale = (LENGTH_UNIT / record.rig.to_metres(1.0)) if record.rig.model == "translation" else 1e6
-    unit = record.rig.amp_unit if record.rig.model == "translation" else "urad"
+    unit_scale, unit = reporting_unit(record)
     load = BACKWARD_LOAD_START * float(np.max(np.hypot(grid.y[:, 0], grid.y[:, 1])))
     seeds = crack_fits_under_load(grid, model, cracks, load)
     if not seeds or min(f.rms for f in seeds.values()) > BACKWARD_CRACK_RATIO * float(grid.noise_std):
         raise refused  # no crack under a load comes near the record: the angles are the likelier reading
-    d = diagnose_output_error(grid, list(model), cands, alpha=alpha, unit_scale=unit_scale, unit=unit,
+    d = diagnose_output_error(grid, list(model), list(cands), alpha=alpha, unit_scale=unit_scale, unit=unit,
                               progress=progress, split=False, seeds=seeds)
     if d.verdict not in ("explained", "explained_after_adding") or not any(e in crack_effects() for e in d.missing):
         raise refused
@@ -948,6 +942,14 @@ def one_mode_band(fit: VectorFit) -> tuple[float, float] | None:
         else:
             return None
     return lo, hi
+
+
+def reporting_unit(record: RigRecord) -> tuple[float, str]:
+    """The factor from the waveforms' dimensionless displacement to the rig's reporting unit,
+    and that unit: the rig's displacement unit on a translation rig, urad on a tilt rig."""
+    if record.rig.model != "translation":
+        return 1e6, "urad"  # rad -> urad
+    return LENGTH_UNIT / record.rig.to_metres(1.0), record.rig.amp_unit
 
 
 def probe_noise(record: RigRecord, w_ref: float) -> dict[str, float]:
